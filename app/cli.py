@@ -33,9 +33,10 @@ def cmd_simulate(args: argparse.Namespace) -> None:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> None:
+    from measurement.report import write_report
+
     from measurement.calibration import calibrate, load_intrinsics
     from measurement.capture import read_capture
-    from measurement.report import write_report
 
     capture = read_capture(Path(args.capture))
     intr = load_intrinsics(Path(args.intrinsics)) if args.intrinsics else None

@@ -1,0 +1,186 @@
+"""Write a simulated capture folder (the project's import format) with its ground truth beside it.
+
+    OUT/rig.json                 {"board_cols", "board_rows", "square_mm", "stripes"}
+    OUT/calib/pose_NN_board.png  room light only          OUT/calib/pose_NN_stripes.png  stripes on
+    OUT/scan/<view>.png          animal under stripes     OUT/scan/<view>_ambient.png    stripes off
+    OUT/truth/truth.json         intrinsics, planes, board poses
+    OUT/truth/<view>.json        anatomy in camera coordinates, scene transform
+    OUT/truth/<view>_stripes.npz exact lit stripe points (points, stripe, uv, kind)
+    OUT/truth/<view>_animal.ply  the animal surface in camera coordinates
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import trimesh
+
+from ..camera import ray_grid
+from .animal import Animal, from_mesh, quadruped
+from .boards import Board, board_surface, sample_poses
+from .render import Lighting, expose, stripe_irradiance, stripe_truth
+from .rig import Rig, default_rig
+from .scene import MeshSurface, PlaneSurface, trace
+
+VIEW_CAMERAS = {  # camera centre and look-at target in the world frame (Y up, animal along X, floor Y = 0)
+    "side": ((-30.0, 480.0, -1250.0), (-30.0, 230.0, 0.0), (0.0, 1.0, 0.0)),
+    "top": ((-30.0, 1350.0, 0.0), (-30.0, 0.0, 0.0), (0.0, 0.0, -1.0)),
+    "front": ((1150.0, 420.0, 0.0), (0.0, 220.0, 0.0), (0.0, 1.0, 0.0)),
+    "back": ((-1150.0, 420.0, 0.0), (0.0, 220.0, 0.0), (0.0, 1.0, 0.0)),
+}
+WALLS = {"side": ((0, 0, 1), 380.0), "front": ((-1, 0, 0), 650.0), "back": ((1, 0, 0), 650.0)}
+
+
+def look_at(centre, target, up) -> tuple[np.ndarray, np.ndarray]:
+    """R_cam_world, t_cam_world of an OpenCV camera (x right, y down, z forward) at ``centre``."""
+    c, z = np.asarray(centre, float), np.asarray(target, float) - np.asarray(centre, float)
+    z /= np.linalg.norm(z)
+    down = -np.asarray(up, float)
+    y = down - z * (down @ z)
+    y /= np.linalg.norm(y)
+    x = np.cross(y, z)
+    R = np.vstack([x, y, z])
+    return R, -R @ c
+
+
+def _noise3(points: np.ndarray, rng_seed: int, waves: int = 7, lo: float = 50, hi: float = 220) -> np.ndarray:
+    """Smooth 3-D value field in [-1, 1] from random plane waves (wavelengths lo..hi mm)."""
+    rng = np.random.default_rng(rng_seed)
+    out = np.zeros(len(points))
+    for _ in range(waves):
+        k = rng.standard_normal(3)
+        k *= 2 * np.pi / rng.uniform(lo, hi) / np.linalg.norm(k)
+        out += np.sin(points @ k + rng.uniform(0, 2 * np.pi))
+    return out / np.sqrt(waves / 2)
+
+
+def animal_scene(animal: Animal, view: str, fur: bool, seed: int) -> tuple[list, np.ndarray, np.ndarray]:
+    """Surfaces of a scan scene in camera coordinates plus the camera pose (R_cam_world, t_cam_world)."""
+    R, t = look_at(*VIEW_CAMERAS[view])
+    to_world = lambda p: (p - t) @ R  # noqa: E731  camera -> world
+
+    def fur_albedo(points: np.ndarray) -> np.ndarray:
+        if not fur:
+            return np.full(len(points), 0.62)
+        n = _noise3(to_world(points), seed + 11)
+        return np.clip(0.5 + 0.32 * n, 0.12, 0.9)
+
+    def floor_albedo(points: np.ndarray) -> np.ndarray:
+        return 0.38 + 0.08 * _noise3(to_world(points), seed + 5, 5, 80, 400)
+
+    surfaces: list = [MeshSurface(animal.vertices @ R.T + t, animal.faces, "animal", fur_albedo)]
+    n_floor = R @ np.array([0.0, 1.0, 0.0])
+    surfaces.append(PlaneSurface(n_floor, float(n_floor @ t), "floor", floor_albedo))
+    if view in WALLS:
+        nw, off = WALLS[view]
+        n_wall = R @ np.asarray(nw, float)
+        surfaces.append(PlaneSurface(n_wall, float(off + n_wall @ t), "wall",
+                                     lambda p: 0.58 + 0.04 * _noise3(to_world(p), seed + 7, 4, 200, 800)))
+    return surfaces, R, t
+
+
+def calibration_scene(board: Board, R: np.ndarray, t: np.ndarray, fx: float) -> list:
+    """The plate in front of a dim far wall."""
+    far = PlaneSurface(np.array([0.0, 0.0, 1.0]), 3200.0, "background", lambda p: np.full(len(p), 0.3))
+    return [board_surface(board, R, t, fx), far]
+
+
+def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] = (3072, 2048), seed: int = 0,
+                  scenes: tuple[str, ...] = ("side", "top"), poses: int = 12, mesh: str | None = None,
+                  fur: bool = True, board: Board | None = None, defects: dict[int, str] | None = None,
+                  rig: Rig | None = None) -> Path:
+    """Render a complete capture (calibration poses + animal views) with ground truth; returns ``out_dir``.
+
+    defects : {pose number (1-based): "no_board" | "no_stripes"} renders deliberately unusable poses.
+    """
+    out = Path(out_dir)
+    for view in scenes:
+        if view not in VIEW_CAMERAS:
+            raise ValueError(f"scene {view!r} unknown; choose from {', '.join(VIEW_CAMERAS)}")
+    for sub in ("calib", "scan", "truth"):
+        (out / sub).mkdir(parents=True, exist_ok=True)
+    board = board or Board()
+    rig = rig or default_rig(size, stripes)
+    rng = np.random.default_rng(seed)
+    rays_xy = ray_grid(rig.intrinsics)
+    (out / "rig.json").write_text(json.dumps({"board_cols": board.cols, "board_rows": board.rows,
+                                              "square_mm": board.square_mm, "stripes": stripes}))
+    truth = _rig_truth(rig, board)
+    defects = defects or {}
+    for i, (R, t) in enumerate(sample_poses(board, rig, poses, rng), start=1):
+        name = f"pose_{i:02d}"
+        surfaces = calibration_scene(board, R, t, rig.intrinsics.fx)
+        if defects.get(i) == "no_board":
+            surfaces = surfaces[1:]
+        hits = trace(surfaces, rig.intrinsics, rays_xy)
+        irr, stripe = stripe_irradiance(hits, rig, surfaces)
+        board_img = expose(hits, surfaces, rig, Lighting(ambient=rng.uniform(100, 130), stripes_on=False), rng)
+        light = Lighting(ambient=rng.uniform(25, 45), stripes_on=defects.get(i) != "no_stripes", fur=False)
+        stripe_img = expose(hits, surfaces, rig, light, rng, irr)
+        cv2.imwrite(str(out / "calib" / f"{name}_board.png"), board_img)
+        cv2.imwrite(str(out / "calib" / f"{name}_stripes.png"), stripe_img)
+        truth["board_poses"].append({"name": name, "R": R.tolist(), "t": t.tolist(), "defect": defects.get(i)})
+        st = stripe_truth(hits, stripe, rig, surfaces)
+        np.savez_compressed(out / "truth" / f"{name}_stripes.npz", **st)
+    animal = from_mesh(mesh) if mesh else quadruped(seed=seed)
+    for view in scenes:
+        _write_view(out, view, animal, rig, rays_xy, fur, seed, rng, truth)
+    (out / "truth" / "truth.json").write_text(json.dumps(truth, indent=1))
+    return out
+
+
+def _write_view(out: Path, view: str, animal: Animal, rig: Rig, rays_xy: np.ndarray, fur: bool, seed: int,
+                rng: np.random.Generator, truth: dict) -> None:
+    surfaces, R, t = animal_scene(animal, view, fur, seed)
+    hits = trace(surfaces, rig.intrinsics, rays_xy)
+    irr, stripe = stripe_irradiance(hits, rig, surfaces)
+    ambient = rng.uniform(30, 50)
+    img = expose(hits, surfaces, rig, Lighting(ambient=ambient, fur=fur), rng, irr)
+    amb = expose(hits, surfaces, rig, Lighting(ambient=ambient, stripes_on=False, fur=fur), rng)
+    cv2.imwrite(str(out / "scan" / f"{view}.png"), img)
+    cv2.imwrite(str(out / "scan" / f"{view}_ambient.png"), amb)
+    st = stripe_truth(hits, stripe, rig, surfaces)
+    np.savez_compressed(out / "truth" / f"{view}_stripes.npz", **st)
+    mesh_cam = surfaces[0]
+    trimesh.Trimesh(mesh_cam.vertices, mesh_cam.faces, process=False).export(out / "truth" / f"{view}_animal.ply")
+    truth["views"][view] = {"R_cam_world": R.tolist(), "t_cam_world": t.tolist(), "fur": fur,
+                            "anatomy": _anatomy_cam(animal.anatomy, R, t)}
+
+
+def _anatomy_cam(anatomy: dict, R: np.ndarray, t: np.ndarray) -> dict:
+    """Anatomy with its points moved to camera coordinates (directions rotated only)."""
+    out = dict(anatomy)
+    for key in ("tail_centreline",):
+        if key in out:
+            out[key] = (np.asarray(out[key]) @ R.T + t).tolist()
+    if "neck_centre" in out:
+        out["neck_centre"] = (R @ np.asarray(out["neck_centre"]) + t).tolist()
+        out["neck_axis"] = (R @ np.asarray(out["neck_axis"])).tolist()
+        out["neck_up"] = (R @ np.asarray(out["neck_up"])).tolist()
+        c, up, r = np.asarray(out["neck_centre"]), np.asarray(out["neck_up"]), out["neck_radius_mm"]
+        toward = -c / np.linalg.norm(c)  # toward the camera, made perpendicular to the neck axis
+        ax = np.asarray(out["neck_axis"])
+        toward -= ax * (toward @ ax) + up * (toward @ up)
+        toward /= np.linalg.norm(toward)
+        ang = np.deg2rad(25.0)  # landmarks 25 deg off the silhouette, on the camera side: pickable
+        marks = [c + r * (np.cos(ang) * s * up + np.sin(ang) * toward) for s in (1, -1)]
+        out["neck_landmarks"] = [m.tolist() for m in marks]
+        out["neck_width_mm"] = float(np.linalg.norm(marks[0] - marks[1]))
+    return out
+
+
+def _rig_truth(rig: Rig, board: Board) -> dict:
+    planes = rig.projector.planes_cam()
+    abc = np.column_stack([-planes[:, 0] / planes[:, 2], -planes[:, 1] / planes[:, 2], planes[:, 3] / planes[:, 2]])
+    return {
+        **rig.intrinsics.to_dict(),
+        "planes": planes.tolist(),
+        "planes_abc": abc.tolist(),
+        "projector_centre": rig.projector.centre_cam.tolist(),
+        "board": {"cols": board.cols, "rows": board.rows, "square_mm": board.square_mm},
+        "board_poses": [],
+        "views": {},
+    }
