@@ -7,9 +7,10 @@ has locked (``FOR UPDATE SKIP LOCKED``), and on every engine the claim is a cond
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from datetime import timedelta
 
-from sqlalchemy import update
+from sqlalchemy import or_, update
 from sqlalchemy.engine import Engine
 from sqlmodel import Session, select
 
@@ -95,16 +96,18 @@ def finish_job(session: Session, job_id: int, worker: str, error: str | None = N
     return True
 
 
-def requeue_stale(engine: Engine, lease_s: float, max_attempts: int) -> list[int]:
-    """Re-queue running jobs whose worker stopped sending heartbeats; fail those tried too often.
-
-    Returns the ids of the jobs touched.
+def requeue_stale(engine: Engine, lease_s: float, max_attempts: int,
+                  dead_workers: Sequence[str] = ()) -> list[int]:
+    """Re-queue running jobs whose worker stopped sending heartbeats (or is known to be dead, by its
+    ``host:pid`` name); fail those interrupted ``max_attempts`` times. Returns the ids of the jobs touched.
     """
     cutoff = utcnow() - timedelta(seconds=lease_s)
     touched = []
+    lost = or_(Job.heartbeat_at < cutoff, Job.heartbeat_at.is_(None))
+    if dead_workers:
+        lost = or_(lost, Job.worker.in_(list(dead_workers)))
     with Session(engine, expire_on_commit=False) as session:
-        query = (select(Job).where(Job.status == JobStatus.running, Job.heartbeat_at < cutoff)
-                 .with_for_update(skip_locked=True))
+        query = select(Job).where(Job.status == JobStatus.running, lost).with_for_update(skip_locked=True)
         for job in session.exec(query).all():
             if job.attempts >= max_attempts:
                 job.status, job.finished_at = JobStatus.failed, utcnow()
@@ -118,6 +121,19 @@ def requeue_stale(engine: Engine, lease_s: float, max_attempts: int) -> list[int
             touched.append(job.id)
         session.commit()
     return touched
+
+
+def release_job(engine: Engine, job_id: int, worker: str) -> bool:
+    """Give a running job back to the queue without counting the attempt (a worker shutting down)."""
+    with Session(engine) as session:
+        count = session.exec(update(Job).where(
+            Job.id == job_id, Job.worker == worker, Job.status == JobStatus.running).values(
+            status=JobStatus.queued, worker=None, attempts=Job.attempts - 1, stage="re-queued: worker stopped",
+            progress=0.0)).rowcount
+        if count == 1:
+            _set_target(session, session.get(Job, job_id), JobStatus.queued)
+        session.commit()
+    return count == 1
 
 
 def _set_target(session: Session, job: Job | None, status: JobStatus, error: str | None = None) -> None:

@@ -1,0 +1,335 @@
+"""The job runner: worker processes claim calibration and scan jobs from the database and run the core.
+
+A worker is ``bodyscan worker`` (any machine sharing the database) or one of the processes that
+``bodyscan serve`` starts. While a job runs its worker refreshes the job's heartbeat; a job whose
+worker died is re-queued by the next worker that polls (or at once when a worker on the same host
+starts and sees the dead process id), and failed after ``max_attempts`` interruptions.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import os
+import signal
+import socket
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+from sqlalchemy.engine import Engine
+from sqlmodel import Session, select
+
+from app.config import Settings, software_version
+from measurement.errors import MeasurementError
+from storage import calibrations, measurements, sessions
+from storage.db import make_engine, session_scope, upgrade
+from storage.jobs import claim_next, finish_job, heartbeat, release_job, requeue_stale
+from storage.models import Job, JobKind, JobStatus, MeasurementKind
+
+log = logging.getLogger(__name__)
+
+Report = Callable[[float, str], None]
+Apply = Callable[[Session], None]
+
+
+class JobLost(Exception):
+    """The job was re-queued or claimed by another worker while this one was running it."""
+
+
+class WorkerStopped(BaseException):
+    """SIGTERM/SIGINT arrived; the current job is handed back to the queue."""
+
+
+def worker_id() -> str:
+    return f"{socket.gethostname()}:{os.getpid()}"
+
+
+# --- handlers ----------------------------------------------------------------------------------------
+
+
+def run_calibration(engine: Engine, job: Job, report: Report) -> Apply:
+    """Calibrate from the stored capture files; returns how to store calibration.json."""
+    from measurement.calibration import calibrate
+    from measurement.capture import RigSettings, capture_from_files, capture_from_zip
+
+    with session_scope(engine) as db:
+        record = calibrations.get_calibration(db, job.result_id)
+        files = calibrations.calibration_files(db, record.id)
+        rig = RigSettings.from_dict(calibrations.rig_of(record))
+    report(0.0, "reading images")
+    if set(files) == {ARCHIVE}:
+        capture = capture_from_zip(files[ARCHIVE], rig)
+    else:
+        capture = capture_from_files(files, rig)
+    result = to_jsonable(calibrate(capture, progress=report).to_dict())
+    return lambda db: calibrations.store_result(db, job.result_id, result)
+
+
+def run_scan(engine: Engine, job: Job, report: Report) -> Apply:
+    """Reconstruct the cloud of a stored scan image; returns how to store cloud and measurements."""
+    from measurement.calibration import load_calibration
+    from measurement.images import decode_image
+    from measurement.pipeline import scan
+
+    with session_scope(engine) as db:
+        record = sessions.get_scan(db, job.result_id)
+        owner = sessions.get_session(db, record.session_id)
+        calibration = calibrations.require_usable(db, owner.calibration_id)
+        image = sessions.scan_image(db, record.id)
+    report(0.05, "decoding image")
+    gray = decode_image(image, record.image_name or f"scan {record.id}")
+    report(0.1, "reconstructing point cloud")
+    result = scan(gray, load_calibration(calibration.result), view=record.view)
+    cloud = {key: getattr(result, key, None) for key in sessions.CLOUD_KEYS}
+    found = to_jsonable(result.measurements)
+
+    def apply(db: Session) -> None:
+        sessions.store_scan_result(db, record.id, cloud, found)
+        for name, value, points in automatic_values(found):
+            measurements.add_measurement(
+                db, session_id=owner.id, scan_id=record.id, calibration_id=calibration.id, name=name,
+                kind=MeasurementKind.automatic.value, method=f"auto:{record.view}", value_mm=value,
+                points=points, created_by="bodyscan", software_version=software_version())
+
+    return apply
+
+
+ARCHIVE = "archive.zip"
+HANDLERS: dict[str, Callable[[Engine, Job, Report], Apply]] = {
+    JobKind.calibration.value: run_calibration,
+    JobKind.scan.value: run_scan,
+}
+
+
+def automatic_values(found: dict) -> list[tuple[str, float, list | None]]:
+    """(name, value in mm, source points) for every ``<name>_mm`` number in a scan's measurements.
+
+    The source points are taken from ``found[<name>]["points"]`` when the pipeline gives them.
+    """
+    out = []
+    for key, value in sorted(found.items()):
+        if not key.endswith("_mm") or isinstance(value, bool) or not isinstance(value, int | float):
+            continue
+        if not np.isfinite(value):
+            continue
+        name = key[: -len("_mm")]
+        detail = found.get(name)
+        points = detail.get("points") if isinstance(detail, dict) else None
+        out.append((name, float(value), points))
+    return out
+
+
+def to_jsonable(value):
+    """numpy scalars/arrays inside dicts and lists -> plain Python, NaN/inf -> None (JSON has neither)."""
+    if isinstance(value, dict):
+        return {str(k): to_jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [to_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return to_jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return None
+    return value
+
+
+# --- running one job ---------------------------------------------------------------------------------
+
+
+class _Lease:
+    """Heartbeats for one job: from the progress callback (throttled) and from a background thread."""
+
+    def __init__(self, engine: Engine, job_id: int, worker: str, every_s: float) -> None:
+        self.engine, self.job_id, self.worker, self.every_s = engine, job_id, worker, every_s
+        self.lost = False
+        self.stage = "starting"
+        self._last = 0.0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._beat, name=f"lease-{job_id}", daemon=True)
+
+    def __enter__(self) -> _Lease:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    def report(self, fraction: float, stage: str) -> None:
+        """Progress callback handed to the core; aborts the job when the lease was lost."""
+        now = time.monotonic()
+        if stage != self.stage or now - self._last > 0.5:
+            self.stage, self._last = stage, now
+            if not heartbeat(self.engine, self.job_id, self.worker, fraction, stage):
+                self.lost = True
+        if self.lost:
+            raise JobLost(f"job {self.job_id} was taken over by another worker")
+
+    def _beat(self) -> None:
+        while not self._stop.wait(self.every_s):
+            try:
+                if not heartbeat(self.engine, self.job_id, self.worker):
+                    self.lost = True
+            except Exception:  # a busy database must not kill the job; the next beat retries
+                log.warning("heartbeat of job %s failed", self.job_id, exc_info=True)
+
+
+def execute(engine: Engine, job: Job, worker: str, settings: Settings) -> JobStatus | None:
+    """Run a claimed job and record its outcome; None when the job was lost to another worker."""
+    handler = HANDLERS.get(job.kind)
+    with _Lease(engine, job.id, worker, settings.heartbeat_s) as lease:
+        try:
+            if handler is None:
+                raise MeasurementError(f"unknown job kind {job.kind!r}")
+            apply = handler(engine, job, lease.report)
+            error = None
+        except JobLost:
+            log.warning("job %s lost to another worker; result discarded", job.id)
+            return None
+        except MeasurementError as exc:
+            apply, error = None, str(exc)
+        except Exception as exc:
+            log.exception("job %s (%s) crashed in stage %r", job.id, job.kind, lease.stage)
+            apply = None
+            error = (f"internal error while {lease.stage}: {type(exc).__name__}: {exc}. This is a bug in "
+                     f"bodyscan {software_version()}; please report it with job id {job.id}")
+    return _record(engine, job, worker, apply, error)
+
+
+def _record(engine: Engine, job: Job, worker: str, apply: Apply | None, error: str | None) -> JobStatus | None:
+    try:
+        with session_scope(engine) as db:
+            if apply is not None:
+                apply(db)
+            if not finish_job(db, job.id, worker, error=error):
+                raise JobLost(f"job {job.id} was taken over by another worker")
+    except JobLost:
+        log.warning("job %s lost to another worker before it finished; result discarded", job.id)
+        return None
+    except (ValueError, TypeError) as exc:  # a result the database cannot take
+        log.exception("storing the result of job %s failed", job.id)
+        with session_scope(engine) as db:
+            finish_job(db, job.id, worker, error=f"internal error while storing the result: {exc}")
+        return JobStatus.failed
+    log.info("job %s (%s) %s%s", job.id, job.kind, "failed: " if error else "succeeded", error or "")
+    return JobStatus.failed if error else JobStatus.succeeded
+
+
+# --- the worker loop ---------------------------------------------------------------------------------
+
+
+def reap(engine: Engine, settings: Settings) -> list[int]:
+    """Re-queue jobs of dead workers: stale heartbeats anywhere, or dead processes on this host."""
+    return requeue_stale(engine, settings.job_lease_s, settings.max_attempts, dead_workers=_dead_local(engine))
+
+
+def _dead_local(engine: Engine) -> list[str]:
+    host = socket.gethostname()
+    with Session(engine) as db:
+        running = db.exec(select(Job.worker).where(Job.status == JobStatus.running)).all()
+    dead = []
+    for name in set(filter(None, running)):
+        wh, _, pid = name.rpartition(":")
+        if wh == host and pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
+            dead.append(name)
+    return dead
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def run_until_idle(engine: Engine, settings: Settings, worker: str | None = None) -> int:
+    """Claim and run jobs until the queue is empty; returns how many ran (used by tests and tools)."""
+    worker = worker or worker_id()
+    reap(engine, settings)
+    count = 0
+    while (job := claim_next(engine, worker)) is not None:
+        execute(engine, job, worker, settings)
+        count += 1
+    return count
+
+
+def run_worker(settings: Settings, stop: threading.Event | None = None) -> None:
+    """Poll the queue until ``stop`` is set or SIGTERM/SIGINT arrives. Migrates the schema first."""
+    engine = make_engine(settings.db_url)
+    upgrade(engine)
+    me, stop = worker_id(), stop or threading.Event()
+    _install_stop_signals()
+    log.info("worker %s polling %s", me, engine.url.render_as_string(hide_password=True))
+    last_reap = 0.0
+    job = None
+    try:
+        while not stop.is_set():
+            if time.monotonic() - last_reap > min(settings.job_lease_s / 4, 30.0):
+                if touched := reap(engine, settings):
+                    log.warning("re-queued or failed jobs of lost workers: %s", touched)
+                last_reap = time.monotonic()
+            job = claim_next(engine, me)
+            if job is None:
+                stop.wait(settings.poll_s)
+                continue
+            log.info("worker %s runs job %s (%s)", me, job.id, job.kind)
+            execute(engine, job, me, settings)
+            job = None
+    except WorkerStopped:
+        log.info("worker %s stopping", me)
+        if job is not None:
+            release_job(engine, job.id, me)
+    finally:
+        engine.dispose()
+
+
+def _install_stop_signals() -> None:
+    if threading.current_thread() is not threading.main_thread():
+        return
+
+    def _stop(signum, _frame):
+        raise WorkerStopped(signal.Signals(signum).name)
+
+    signal.signal(signal.SIGTERM, _stop)
+    signal.signal(signal.SIGINT, _stop)
+
+
+# --- the in-process pool of `bodyscan serve` ---------------------------------------------------------
+
+
+def _pool_main(settings_json: str) -> None:
+    logging.basicConfig(level=Settings.model_validate_json(settings_json).log_level.upper(),
+                        format="%(asctime)s %(levelname)s %(processName)s %(name)s: %(message)s")
+    run_worker(Settings.model_validate_json(settings_json))
+
+
+def start_pool(settings: Settings) -> list[multiprocessing.Process]:
+    """Start ``settings.workers`` worker processes (spawned, so they share nothing with the server)."""
+    ctx = multiprocessing.get_context("spawn")
+    procs = []
+    for i in range(settings.workers):
+        proc = ctx.Process(target=_pool_main, args=(settings.model_dump_json(),), name=f"bodyscan-worker-{i + 1}",
+                           daemon=True)
+        proc.start()
+        procs.append(proc)
+    return procs
+
+
+def stop_pool(procs: list[multiprocessing.Process], timeout_s: float = 10.0) -> None:
+    """SIGTERM the workers (a running job goes back to the queue), then kill stragglers."""
+    for proc in procs:
+        if proc.is_alive():
+            proc.terminate()
+    deadline = time.monotonic() + timeout_s
+    for proc in procs:
+        proc.join(max(deadline - time.monotonic(), 0.1))
+        if proc.is_alive():
+            log.warning("worker %s did not stop in time; killing it", proc.name)
+            proc.kill()
+            proc.join(1.0)
