@@ -17,7 +17,7 @@ from sqlmodel import Session, select
 from .errors import NotFoundError
 from .models import Calibration, Job, JobKind, JobStatus, Scan, utcnow
 
-TARGETS = {JobKind.calibration: Calibration, JobKind.scan: Scan}
+TARGETS = {JobKind.calibration.value: Calibration, JobKind.scan.value: Scan}
 
 
 def enqueue(session: Session, kind: JobKind, result_id: int) -> Job:
@@ -137,9 +137,9 @@ def release_job(engine: Engine, job_id: int, worker: str) -> bool:
 
 
 def _set_target(session: Session, job: Job | None, status: JobStatus, error: str | None = None) -> None:
-    if job is None:
+    if job is None or job.kind not in TARGETS:
         return
-    target = session.get(TARGETS[JobKind(job.kind)], job.result_id)
+    target = session.get(TARGETS[job.kind], job.result_id)
     if target is None:
         return
     target.status, target.error = status, error
