@@ -3,13 +3,20 @@
 from __future__ import annotations
 
 import json
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import cv2
 import numpy as np
 
-from .camera import Intrinsics
-from .errors import CalibrationError
+from .board import BoardParams, board_plane, find_corners, object_points
+from .camera import Intrinsics, rays
+from .capture import Capture
+from .errors import CalibrationError, StripeDetectionError
+from .planes import fit_planes, plane_error_e2, planes_to_abc, point_plane_distance
+from .stripes import StripeParams, detect_board_stripes
 
 
 @dataclass(frozen=True, eq=False)
@@ -51,3 +58,239 @@ def load_calibration(src: str | Path | dict) -> Calibration:
 def load_intrinsics(src: str | Path | dict) -> Intrinsics:
     """The camera part of an earlier calibration.json."""
     return load_calibration(src).intrinsics
+
+
+# --- calibrating ---------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class CalibrationParams:
+    """Knobs of the whole calibration.
+
+    plane_method : "abc" (the paper's z = A x + B y + C), "tls", "robust" (RANSAC + trimmed TLS) or
+                   "pencil" (robust, then all planes share one axis through the projector)
+    min_poses    : fewer usable board poses than this is an error (Zhang's method needs 3)
+    outlier_factor: a pose whose reprojection error exceeds this many times the median is dropped
+    """
+
+    stripes: StripeParams = field(default_factory=StripeParams)
+    board: BoardParams = field(default_factory=BoardParams)
+    plane_method: str = "pencil"
+    min_poses: int = 3
+    outlier_factor: float = 4.0
+
+
+@dataclass(frozen=True, eq=False)
+class PoseReport:
+    """What happened to one calibration pose.
+
+    used            : the pose's corners took part in the camera calibration
+    used_for_planes : its stripe centres took part in the light-plane fit
+    reason          : why not, when one of the two is False
+    """
+
+    name: str
+    used: bool
+    used_for_planes: bool = False
+    reason: str | None = None
+    reprojection_error_px: float | None = None
+    stripe_rows: int = 0
+    stripe_points: int = 0
+    board_plane: list | None = None
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "used": self.used, "used_for_planes": self.used_for_planes,
+                "reason": self.reason, "reprojection_error_px": self.reprojection_error_px,
+                "stripe_rows": self.stripe_rows, "stripe_points": self.stripe_points,
+                "board_plane": self.board_plane}
+
+
+@dataclass(frozen=True, eq=False)
+class CalibrationResult:
+    """A finished calibration.
+
+    planes          : (N, 4) [nx, ny, nz, d], n.X = d, mm, camera frame, left to right; None if camera-only
+    plane_rms_mm    : (N,) RMS distance of each stripe's board points to its plane
+    plane_points    : (N,) number of points behind each plane
+    """
+
+    intrinsics: Intrinsics
+    reprojection_error_px: float
+    poses: list[PoseReport]
+    rig: dict
+    planes: np.ndarray | None = None
+    plane_error: float | None = None
+    plane_rms_mm: np.ndarray | None = None
+    plane_points: np.ndarray | None = None
+    plane_method: str | None = None
+    stripe_method: str | None = None
+    seconds: float = 0.0
+
+    def calibration(self) -> Calibration:
+        return Calibration(self.intrinsics, self.planes, self.to_dict())
+
+    def to_dict(self) -> dict:
+        d = {
+            **self.intrinsics.to_dict(),
+            "reprojection_error_px": self.reprojection_error_px,
+            "planes": None if self.planes is None else self.planes.tolist(),
+            "planes_abc": None if self.planes is None else planes_to_abc(self.planes).tolist(),
+            "plane_error": self.plane_error,
+            "plane_rms_mm": None if self.plane_rms_mm is None else self.plane_rms_mm.tolist(),
+            "plane_points": None if self.plane_points is None else self.plane_points.tolist(),
+            "stripes": 0 if self.planes is None else len(self.planes),
+            "plane_method": self.plane_method,
+            "stripe_method": self.stripe_method,
+            "rig": self.rig,
+            "poses": [p.to_dict() for p in self.poses],
+            "seconds": round(self.seconds, 3),
+            "software": "bodyscan " + _version(),
+        }
+        return d
+
+
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("bodyscan")
+    except Exception:  # noqa: BLE001  not installed (running from a checkout)
+        return "dev"
+
+
+Progress = Callable[[float, str], None]
+
+
+def calibrate(capture: Capture, intrinsics: Intrinsics | None = None, params: CalibrationParams | None = None,
+              progress: Progress | None = None) -> CalibrationResult:
+    """Calibrate the camera (Zhang, unless ``intrinsics`` are given) and one light plane per stripe.
+
+    Poses whose board is not found, whose reprojection error is an outlier, or whose stripe image does not
+    show all N stripes are skipped and reported with the reason. Raises CalibrationError when fewer than
+    ``params.min_poses`` poses remain, naming the files.
+    """
+    params = params or CalibrationParams()
+    report = progress or (lambda f, s: None)
+    t0 = time.perf_counter()
+    rig = capture.rig
+    pattern = (rig.board_cols, rig.board_rows)
+    if not capture.poses:
+        raise CalibrationError("capture holds no calib/pose_NN_board images")
+    size = (capture.poses[0].board.shape[1], capture.poses[0].board.shape[0])
+    if intrinsics is not None and tuple(intrinsics.image_size) != size:
+        raise CalibrationError(f"{capture.poses[0].board_file}: images are {size[0]}x{size[1]} but the given "
+                               f"intrinsics are for {intrinsics.image_size[0]}x{intrinsics.image_size[1]}")
+    corners: dict[str, np.ndarray] = {}
+    reasons: dict[str, str] = {}
+    for i, pose in enumerate(capture.poses):
+        report(0.5 * i / len(capture.poses), f"finding the chessboard in {pose.board_file}")
+        c = find_corners(pose.board, pattern, params.board)
+        if c is None:
+            reasons[pose.name] = f"{pose.board_file}: chessboard {pattern[0]}x{pattern[1]} not found"
+        else:
+            corners[pose.name] = c
+    _require_poses(corners, reasons, params.min_poses, pattern, capture)
+    report(0.5, "calibrating the camera")
+    intr, extr, errors = _camera(corners, rig.square_mm, pattern, size, intrinsics, reasons, params)
+    _require_poses(extr, reasons, params.min_poses, pattern, capture)
+    total_sq = sum(e**2 * len(corners[n]) for n, e in errors.items())
+    e1 = float(np.sqrt(total_sq / sum(len(corners[n]) for n in errors)))
+    groups: list[list[np.ndarray]] = [[] for _ in range(rig.stripes)]
+    pose_reports = []
+    for i, pose in enumerate(capture.poses):
+        report(0.6 + 0.3 * i / len(capture.poses), f"stripe centres in {pose.stripes_file or pose.name}")
+        pose_reports.append(_pose_stripes(pose, corners, extr, errors, reasons, intr, rig, pattern, params, groups))
+    have_stripes = any(p.stripes is not None for p in capture.poses)
+    result = dict(intrinsics=intr, reprojection_error_px=e1, poses=pose_reports, rig=rig.to_dict(),
+                  stripe_method=params.stripes.method)
+    if not have_stripes:
+        return CalibrationResult(**result, seconds=time.perf_counter() - t0)
+    plane_poses = [p for p in pose_reports if p.used_for_planes]
+    if len(plane_poses) < 2:
+        why = "; ".join(p.reason for p in pose_reports if p.reason) or "no stripe images"
+        raise CalibrationError(f"light planes need at least 2 poses showing all {rig.stripes} stripes on the "
+                               f"board, found {len(plane_poses)} ({why})")
+    report(0.92, f"fitting {rig.stripes} light planes ({params.plane_method})")
+    pts = [np.vstack(g) for g in groups]
+    planes, masks = fit_planes(pts, params.plane_method)
+    rms = np.array([np.sqrt(np.mean(point_plane_distance(g[m], p) ** 2))
+                    for g, m, p in zip(pts, masks, planes, strict=True)])
+    report(1.0, "done")
+    return CalibrationResult(**result, planes=planes, plane_error=plane_error_e2(planes), plane_rms_mm=rms,
+                             plane_points=np.array([len(g) for g in pts]), plane_method=params.plane_method,
+                             seconds=time.perf_counter() - t0)
+
+
+def _require_poses(found: dict, reasons: dict, n: int, pattern: tuple[int, int], capture: Capture) -> None:
+    if len(found) >= n:
+        return
+    if not found and all("not found" in r for r in reasons.values()):
+        raise CalibrationError(
+            f"chessboard {pattern[0]}x{pattern[1]} (inner corners) not found in any of the "
+            f"{len(capture.poses)} board images (e.g. {capture.poses[0].board_file}): check board_cols and "
+            "board_rows against the plate")
+    listed = "; ".join(reasons.values())
+    raise CalibrationError(f"only {len(found)} usable board pose(s), at least {n} needed: {listed}")
+
+
+def _camera(corners, square_mm, pattern, size, intrinsics, reasons, params):
+    """Zhang's calibration (or PnP with fixed intrinsics), dropping poses with outlier reprojection error."""
+    names = sorted(corners)
+    obj = object_points(pattern, square_mm)
+    while True:
+        imgp = [corners[n].astype(np.float32).reshape(-1, 1, 2) for n in names]
+        if intrinsics is None:
+            _, K, dist, rvecs, tvecs = cv2.calibrateCamera(
+                [obj] * len(names), imgp, size, None, None,
+                criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12))
+            intr = Intrinsics(K, dist.ravel()[:5] if dist.size >= 5 else np.pad(dist.ravel(), (0, 5 - dist.size)),
+                              size)
+        else:
+            intr = intrinsics
+            rvecs, tvecs = [], []
+            for p in imgp:
+                ok, rv, tv = cv2.solvePnP(obj, p, intr.camera_matrix, intr.dist_coeffs, flags=cv2.SOLVEPNP_ITERATIVE)
+                rvecs.append(rv)
+                tvecs.append(tv)
+        errors = {}
+        extr = {}
+        for n, p, rv, tv in zip(names, imgp, rvecs, tvecs, strict=True):
+            proj, _ = cv2.projectPoints(obj, rv, tv, intr.camera_matrix, intr.dist_coeffs)
+            errors[n] = float(np.sqrt(np.mean(np.sum((proj.reshape(-1, 2) - p.reshape(-1, 2)) ** 2, axis=1))))
+            extr[n] = (cv2.Rodrigues(rv)[0], tv.ravel())
+        med = float(np.median(list(errors.values())))
+        worst = max(errors, key=errors.get)
+        if errors[worst] > max(params.outlier_factor * med, 0.5) and len(names) > params.min_poses:
+            reasons[worst] = (f"reprojection error {errors[worst]:.2f} px is an outlier "
+                              f"(median {med:.2f} px): corners misdetected or the board moved")
+            names.remove(worst)
+            continue
+        return intr, extr, errors
+
+
+def _pose_stripes(pose, corners, extr, errors, reasons, intr, rig, pattern, params, groups) -> PoseReport:
+    if pose.name not in extr:
+        return PoseReport(pose.name, False, reason=reasons.get(pose.name))
+    R, t = extr[pose.name]
+    plane = board_plane(R, t)
+    base = dict(name=pose.name, used=True, reprojection_error_px=errors[pose.name], board_plane=plane.tolist())
+    if pose.stripes is None:
+        return PoseReport(**base, reason="no stripe image")
+    try:
+        found = detect_board_stripes(pose.stripes, pose.board, corners[pose.name], pattern, rig.stripes,
+                                     params.stripes, pose.stripes_file or pose.name)
+    except StripeDetectionError as exc:
+        return PoseReport(**base, reason=str(exc))
+    pts = backproject_to_plane(found.uv, plane, intr)
+    for k in range(rig.stripes):
+        groups[k].append(pts[found.stripe == k])
+    return PoseReport(**base, used_for_planes=True, stripe_rows=found.rows_used, stripe_points=len(pts))
+
+
+def backproject_to_plane(uv: np.ndarray, plane: np.ndarray, intr: Intrinsics) -> np.ndarray:
+    """Intersect the viewing rays of distorted pixels with a plane (eq. 5-6 of the paper, after undistortion).
+
+    uv : (N, 2) pixels; plane : [nx, ny, nz, d] with n.X = d; returns (N, 3) mm camera frame
+    """
+    r = rays(uv, intr)
+    s = plane[3] / (r @ plane[:3])
+    return r * s[:, None]
