@@ -52,6 +52,10 @@ def install(app: FastAPI) -> None:
     async def unprocessable(_: Request, exc: Exception) -> JSONResponse:
         return _detail(422, str(exc))
 
+    @app.exception_handler(OverflowError)
+    async def overflow(_: Request, exc: OverflowError) -> JSONResponse:
+        return _detail(422, "a number in the request is too large (ids and counts are 64-bit integers)")
+
     @app.exception_handler(IntegrityError)
     async def integrity(_: Request, exc: IntegrityError) -> JSONResponse:
         log.warning("integrity error: %s", exc.orig)
@@ -62,6 +66,12 @@ def install(app: FastAPI) -> None:
         log.error("database error: %s", exc.orig)
         return JSONResponse(status_code=503, headers={"Retry-After": "5"},
                             content={"detail": "the database is unavailable or busy; try again shortly"})
+
+    @app.exception_handler(Exception)
+    async def unexpected(request: Request, exc: Exception) -> JSONResponse:
+        log.exception("unexpected error on %s %s", request.method, request.url.path)
+        return _detail(500, f"internal error ({type(exc).__name__}); nothing was changed. This is a bug in "
+                            "bodyscan: please report it with the server log")
 
     @app.exception_handler(RequestValidationError)
     async def invalid_request(_: Request, exc: RequestValidationError) -> JSONResponse:

@@ -47,8 +47,6 @@ def update_animal(session: Session, animal_id: int, data: AnimalUpdate) -> Anima
         if changes["tag"] != animal.tag:
             _check_tag_free(session, changes["tag"])
     for key, value in changes.items():
-        if value is None and key not in ("birth_date",):
-            continue  # explicit null only clears the optional birth date
         setattr(animal, key, value)
     animal.updated_at = utcnow()
     session.add(animal)

@@ -66,6 +66,6 @@ def require_usable(session: Session, calibration_id: int) -> Calibration:
         raise ConflictError(f"calibration {calibration_id} failed ({calibration.error}); "
                             "upload a new calibration and use its id")
     if calibration.status != JobStatus.succeeded or calibration.result is None:
-        raise ConflictError(f"calibration {calibration_id} is still {calibration.status.value}; "
+        raise ConflictError(f"calibration {calibration_id} is still {calibration.status}; "
                             "wait until its job reports 'succeeded'")
     return calibration

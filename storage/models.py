@@ -12,7 +12,7 @@ from datetime import UTC, datetime
 from enum import StrEnum
 from typing import Annotated, Any
 
-from pydantic import AfterValidator, ConfigDict, field_validator
+from pydantic import AfterValidator, ConfigDict, field_validator, model_validator
 from sqlalchemy import JSON, Column, DateTime, Index, LargeBinary, String, UniqueConstraint
 from sqlmodel import Field, SQLModel
 
@@ -124,6 +124,18 @@ class AnimalUpdate(SQLModel):
     birth_date: dt.date | None = None
     status: str | None = Field(default=None, max_length=32)
     notes: str | None = Field(default=None, max_length=4000)
+
+    @field_validator("tag")
+    @classmethod
+    def _strip_tag(cls, v: str | None) -> str | None:
+        return None if v is None else AnimalCreate._strip_tag(v)
+
+    @model_validator(mode="after")
+    def _null_only_clears_birth_date(self) -> AnimalUpdate:
+        for name in sorted(self.model_fields_set):
+            if getattr(self, name) is None and name != "birth_date":
+                raise ValueError(f"{name} cannot be null (leave it out to keep its value)")
+        return self
 
 
 class AnimalPublic(AnimalBase):

@@ -88,6 +88,6 @@ def scan_cloud(session: Session, scan_id: int) -> dict[str, np.ndarray]:
     scan = get_scan(session, scan_id)
     if scan.status != JobStatus.succeeded or scan.cloud_blob_id is None:
         detail = f" ({scan.error})" if scan.error else ""
-        raise ConflictError(f"scan {scan_id} is {scan.status.value}{detail}; it has no point cloud yet")
+        raise ConflictError(f"scan {scan_id} is {scan.status}{detail}; it has no point cloud yet")
     with np.load(io.BytesIO(get_bytes(session, scan.cloud_blob_id))) as npz:
         return {k: npz[k] for k in npz.files}

@@ -18,6 +18,8 @@ from storage.models import Calibration, JobKind
 
 router = APIRouter(prefix="/calibrations", tags=["calibrations"])
 RIG_FIELDS = ("board_cols", "board_rows", "square_mm", "stripes")
+MAX_CORNERS = 200
+MAX_STRIPES = 4096
 
 
 @router.post("", status_code=202, response_model=Accepted)
@@ -27,10 +29,10 @@ def create_calibration(
     files: Annotated[list[UploadFile] | None, File(description="pose images named as in the capture layout, "
                                                    "e.g. calib/pose_01_board.png; rig.json may be one of them")] = None,
     archive: Annotated[UploadFile | None, File(description="one zip of a capture folder")] = None,
-    board_cols: Annotated[int | None, Form(description="chessboard inner corners along a row")] = None,
-    board_rows: Annotated[int | None, Form(description="chessboard inner corners along a column")] = None,
-    square_mm: Annotated[float | None, Form(description="chessboard square size, mm")] = None,
-    stripes: Annotated[int | None, Form(description="projector stripe count")] = None,
+    board_cols: Annotated[int | None, Form(ge=2, le=MAX_CORNERS, description="chessboard inner corners along a row")] = None,
+    board_rows: Annotated[int | None, Form(ge=2, le=MAX_CORNERS, description="chessboard inner corners along a column")] = None,
+    square_mm: Annotated[float | None, Form(gt=0, lt=1000, description="chessboard square size, mm")] = None,
+    stripes: Annotated[int | None, Form(ge=2, le=MAX_STRIPES, description="projector stripe count")] = None,
     name: Annotated[str, Form(max_length=200)] = "",
 ):
     """Store the capture and queue the calibration job. Rig fields override the upload's rig.json.
@@ -63,7 +65,7 @@ def _out(db, record: Calibration, with_result: bool) -> CalibrationOut:
     extra = dict(record.result or {}) if with_result else {}
     for key in CalibrationOut.model_fields:
         extra.pop(key, None)  # calibration.json never overrides the record's own fields
-    return CalibrationOut(**record.model_dump(exclude={"result"}), job_id=job.id if job else None,
+    return CalibrationOut(**record.model_dump(exclude={"result"}, warnings=False), job_id=job.id if job else None,
                           files=calibrations.calibration_file_names(db, record.id), **extra)
 
 
@@ -106,4 +108,8 @@ def _validated_rig(load: Callable, given: dict) -> dict:
             capture = load(RigSettings.from_dict({**capture.rig.to_dict(), **given}, source="form fields"))
     if not capture.poses:
         raise CaptureError("no calibration images: upload calib/pose_NN_board.png (and pose_NN_stripes.png) files")
-    return capture.rig.to_dict()
+    rig = capture.rig.to_dict()
+    for name, top in (("board_cols", MAX_CORNERS), ("board_rows", MAX_CORNERS), ("stripes", MAX_STRIPES)):
+        if rig[name] > top:
+            raise BadUpload(f"rig.json: {name} = {rig[name]} is more than the largest supported ({top})")
+    return rig

@@ -17,7 +17,7 @@ router = APIRouter(prefix="/scans", tags=["scans"])
 
 def scan_out(db, scan: Scan) -> ScanOut:
     job = job_for(db, JobKind.scan, scan.id)
-    return ScanOut(**scan.model_dump(), job_id=job.id if job else None)
+    return ScanOut(**scan.model_dump(warnings=False), job_id=job.id if job else None)
 
 
 @router.get("/{scan_id}", response_model=ScanOut)
@@ -30,9 +30,9 @@ def read_scan(scan_id: int, db: DbDep):
             responses={200: {"content": {"application/octet-stream": {}}, "description": "binary PLY"}})
 def download_cloud(scan_id: int, db: DbDep) -> Response:
     """The animal's point cloud, binary little-endian PLY: x, y, z in mm (camera frame) and stripe index."""
+    cloud = sessions.scan_cloud(db, scan_id)
     from measurement.ply import write_ply
 
-    cloud = sessions.scan_cloud(db, scan_id)
     body = write_ply(cloud["points"], cloud.get("stripe"))
     return Response(body, media_type="application/octet-stream",
                     headers={"Content-Disposition": attachment(f"scan_{scan_id}.ply")})
