@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -15,7 +16,7 @@ from .board import BoardParams, board_plane, find_corners, object_points
 from .camera import Intrinsics, rays
 from .capture import Capture
 from .errors import CalibrationError, StripeDetectionError
-from .planes import fit_planes, plane_error_e2, planes_to_abc, point_plane_distance
+from .planes import fit_planes_detailed, plane_error_e2, planes_to_abc, point_plane_distance
 from .stripes import StripeParams, detect_board_stripes
 
 
@@ -109,6 +110,9 @@ class CalibrationResult:
     """A finished calibration.
 
     planes          : (N, 4) [nx, ny, nz, d], n.X = d, mm, camera frame, left to right; None if camera-only
+    plane_error     : E2 (Algorithm 4) of the final planes; zero up to rounding for a pencil fit, whose
+                      planes share an axis by construction
+    plane_error_unconstrained : E2 of the independent per-stripe fits, the paper's consistency check
     plane_rms_mm    : (N,) RMS distance of each stripe's board points to its plane
     plane_points    : (N,) number of points behind each plane
     """
@@ -119,6 +123,7 @@ class CalibrationResult:
     rig: dict
     planes: np.ndarray | None = None
     plane_error: float | None = None
+    plane_error_unconstrained: float | None = None
     plane_rms_mm: np.ndarray | None = None
     plane_points: np.ndarray | None = None
     plane_method: str | None = None
@@ -135,6 +140,7 @@ class CalibrationResult:
             "planes": None if self.planes is None else self.planes.tolist(),
             "planes_abc": None if self.planes is None else planes_to_abc(self.planes).tolist(),
             "plane_error": self.plane_error,
+            "plane_error_unconstrained": self.plane_error_unconstrained,
             "plane_rms_mm": None if self.plane_rms_mm is None else self.plane_rms_mm.tolist(),
             "plane_points": None if self.plane_points is None else self.plane_points.tolist(),
             "stripes": 0 if self.planes is None else len(self.planes),
@@ -158,6 +164,7 @@ def _version() -> str:
 
 
 Progress = Callable[[float, str], None]
+_WORKERS = 2  # this product targets small lab PCs; two threads already hide most of the I/O-free work
 
 
 def calibrate(capture: Capture, intrinsics: Intrinsics | None = None, params: CalibrationParams | None = None,
@@ -181,9 +188,10 @@ def calibrate(capture: Capture, intrinsics: Intrinsics | None = None, params: Ca
                                f"intrinsics are for {intrinsics.image_size[0]}x{intrinsics.image_size[1]}")
     corners: dict[str, np.ndarray] = {}
     reasons: dict[str, str] = {}
-    for i, pose in enumerate(capture.poses):
-        report(0.5 * i / len(capture.poses), f"finding the chessboard in {pose.board_file}")
-        c = find_corners(pose.board, pattern, params.board)
+    report(0.0, "finding the chessboard")
+    with ThreadPoolExecutor(max_workers=_WORKERS) as pool:  # OpenCV releases the GIL
+        found_all = list(pool.map(lambda p: find_corners(p.board, pattern, params.board), capture.poses))
+    for pose, c in zip(capture.poses, found_all, strict=True):
         if c is None:
             reasons[pose.name] = f"{pose.board_file}: chessboard {pattern[0]}x{pattern[1]} not found"
         else:
@@ -195,10 +203,14 @@ def calibrate(capture: Capture, intrinsics: Intrinsics | None = None, params: Ca
     total_sq = sum(e**2 * len(corners[n]) for n, e in errors.items())
     e1 = float(np.sqrt(total_sq / sum(len(corners[n]) for n in errors)))
     groups: list[list[np.ndarray]] = [[] for _ in range(rig.stripes)]
-    pose_reports = []
-    for i, pose in enumerate(capture.poses):
-        report(0.6 + 0.3 * i / len(capture.poses), f"stripe centres in {pose.stripes_file or pose.name}")
-        pose_reports.append(_pose_stripes(pose, corners, extr, errors, reasons, intr, rig, pattern, params, groups))
+    report(0.6, "finding stripe centres on the board")
+    with ThreadPoolExecutor(max_workers=_WORKERS) as pool:
+        done = list(pool.map(lambda p: _pose_stripes(p, corners, extr, errors, reasons, intr, rig, pattern, params),
+                             capture.poses))
+    pose_reports = [r for r, _ in done]
+    for _, pts_by_stripe in done:
+        for k, pts in enumerate(pts_by_stripe):
+            groups[k].append(pts)
     have_stripes = any(p.stripes is not None for p in capture.poses)
     result = dict(intrinsics=intr, reprojection_error_px=e1, poses=pose_reports, rig=rig.to_dict(),
                   stripe_method=params.stripes.method)
@@ -211,11 +223,12 @@ def calibrate(capture: Capture, intrinsics: Intrinsics | None = None, params: Ca
                                f"board, found {len(plane_poses)} ({why})")
     report(0.92, f"fitting {rig.stripes} light planes ({params.plane_method})")
     pts = [np.vstack(g) for g in groups]
-    planes, masks = fit_planes(pts, params.plane_method)
+    planes, masks, independent = fit_planes_detailed(pts, params.plane_method)
     rms = np.array([np.sqrt(np.mean(point_plane_distance(g[m], p) ** 2))
                     for g, m, p in zip(pts, masks, planes, strict=True)])
     report(1.0, "done")
-    return CalibrationResult(**result, planes=planes, plane_error=plane_error_e2(planes), plane_rms_mm=rms,
+    return CalibrationResult(**result, planes=planes, plane_error=plane_error_e2(planes),
+                             plane_error_unconstrained=plane_error_e2(independent), plane_rms_mm=rms,
                              plane_points=np.array([len(g) for g in pts]), plane_method=params.plane_method,
                              seconds=time.perf_counter() - t0)
 
@@ -267,23 +280,25 @@ def _camera(corners, square_mm, pattern, size, intrinsics, reasons, params):
         return intr, extr, errors
 
 
-def _pose_stripes(pose, corners, extr, errors, reasons, intr, rig, pattern, params, groups) -> PoseReport:
+def _pose_stripes(pose, corners, extr, errors, reasons, intr, rig, pattern, params
+                  ) -> tuple[PoseReport, list[np.ndarray]]:
+    """One pose's report and its stripe centres on the board plane, grouped by stripe ((M_k, 3) mm each)."""
     if pose.name not in extr:
-        return PoseReport(pose.name, False, reason=reasons.get(pose.name))
+        return PoseReport(pose.name, False, reason=reasons.get(pose.name)), []
     R, t = extr[pose.name]
     plane = board_plane(R, t)
     base = dict(name=pose.name, used=True, reprojection_error_px=errors[pose.name], board_plane=plane.tolist())
     if pose.stripes is None:
-        return PoseReport(**base, reason="no stripe image")
+        return PoseReport(**base, reason="no stripe image"), []
     try:
         found = detect_board_stripes(pose.stripes, pose.board, corners[pose.name], pattern, rig.stripes,
                                      params.stripes, pose.stripes_file or pose.name)
     except StripeDetectionError as exc:
-        return PoseReport(**base, reason=str(exc))
+        return PoseReport(**base, reason=str(exc)), []
     pts = backproject_to_plane(found.uv, plane, intr)
-    for k in range(rig.stripes):
-        groups[k].append(pts[found.stripe == k])
-    return PoseReport(**base, used_for_planes=True, stripe_rows=found.rows_used, stripe_points=len(pts))
+    by_stripe = [pts[found.stripe == k] for k in range(rig.stripes)]
+    report = PoseReport(**base, used_for_planes=True, stripe_rows=found.rows_used, stripe_points=len(pts))
+    return report, by_stripe
 
 
 def backproject_to_plane(uv: np.ndarray, plane: np.ndarray, intr: Intrinsics) -> np.ndarray:

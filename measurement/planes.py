@@ -55,17 +55,16 @@ def fit_plane_robust(points: np.ndarray, rng: np.random.Generator | None = None,
     """
     pts = _check_points(points)
     rng = rng or np.random.default_rng(0)
-    best, best_count = fit_plane_tls(pts), -1
     tol = inlier_mm if inlier_mm is not None else 2.0
-    for _ in range(iterations):
-        tri = pts[rng.choice(len(pts), 3, replace=False)]
-        n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
-        if np.linalg.norm(n) < 1e-9:
-            continue
-        n /= np.linalg.norm(n)
-        count = int((np.abs(pts @ n - n @ tri[0]) < tol).sum())
-        if count > best_count:
-            best, best_count = np.append(n, n @ tri[0]), count
+    sample = pts[rng.choice(len(pts), min(len(pts), 2000), replace=False)]  # scoring on a subsample
+    tri = sample[rng.integers(0, len(sample), (iterations, 3))]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    norm = np.linalg.norm(n, axis=1)
+    good = norm > 1e-9
+    n = n[good] / norm[good, None]
+    d = np.einsum("ij,ij->i", n, tri[good, 0])
+    counts = (np.abs(sample @ n.T - d) < tol).sum(axis=0)
+    best = np.append(n[np.argmax(counts)], d[np.argmax(counts)]) if len(counts) else fit_plane_tls(pts)
     inl = np.abs(point_plane_distance(pts, best)) < tol
     plane = best
     for _ in range(4):
@@ -85,19 +84,29 @@ def fit_planes(groups: list[np.ndarray], method: str = "pencil") -> tuple[np.nda
     groups  : list of (N_k, 3) float64 mm, one per stripe, left to right
     returns : planes (K, 4), inlier masks (list of (N_k,) bool)
     """
+    planes, masks, _ = fit_planes_detailed(groups, method)
+    return planes, masks
+
+
+def fit_planes_detailed(groups: list[np.ndarray], method: str = "pencil"
+                        ) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+    """Like fit_planes, also returning the independent per-stripe fits (K, 4) before any pencil constraint."""
     if method not in PLANE_METHODS:
         raise ValueError(f"method must be one of {PLANE_METHODS}, got {method!r}")
+    every = [np.ones(len(g), bool) for g in groups]
     if method == "abc":
         planes = np.array([_orient(abc_to_plane(fit_plane_abc(g))) for g in groups])
-        return planes, [np.ones(len(g), bool) for g in groups]
+        return planes, every, planes
     if method == "tls":
-        return np.array([fit_plane_tls(g) for g in groups]), [np.ones(len(g), bool) for g in groups]
+        planes = np.array([fit_plane_tls(g) for g in groups])
+        return planes, every, planes
     fits = [fit_plane_robust(g) for g in groups]
-    planes = np.array([f[0] for f in fits])
+    independent = np.array([f[0] for f in fits])
     masks = [f[1] for f in fits]
+    planes = independent
     if method == "pencil" and len(groups) >= 3:
-        planes = fit_pencil([g[m] for g, m in zip(groups, masks, strict=True)], planes)
-    return planes, masks
+        planes = fit_pencil([g[m] for g, m in zip(groups, masks, strict=True)], independent)
+    return planes, masks, independent
 
 
 def pencil_axis(planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
