@@ -5,8 +5,10 @@ from __future__ import annotations
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
+from pathlib import Path
 
 from fastapi import FastAPI
+from fastapi.staticfiles import StaticFiles
 from starlette.middleware.base import BaseHTTPMiddleware
 from starlette.requests import Request
 from starlette.responses import JSONResponse, Response
@@ -18,6 +20,7 @@ from app.routes import api_router
 from storage.db import make_engine, upgrade
 
 log = logging.getLogger(__name__)
+STATIC = Path(__file__).resolve().parents[1] / "static"
 
 
 def configure_logging(settings: Settings) -> None:
@@ -50,6 +53,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(BaseHTTPMiddleware, dispatch=_limit_body(settings.max_upload_bytes))
     errors.install(app)
     app.include_router(api_router, prefix="/api")
+    if (STATIC / "index.html").is_file():  # the technician's web page, when it is shipped
+        app.mount("/", StaticFiles(directory=STATIC, html=True), name="static")
     return app
 
 

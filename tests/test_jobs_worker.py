@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import json
 import multiprocessing
 import os
 import signal
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import pytest
 from sqlmodel import Session
@@ -18,6 +22,7 @@ from storage.jobs import get_job
 from storage.models import JobKind, JobStatus
 from tests.backend_support import migrated_engine, png, settings_for
 
+ROOT = Path(__file__).resolve().parents[1]
 RIG = {"board_cols": 9, "board_rows": 6, "square_mm": 20.0, "stripes": 40}
 
 
@@ -89,3 +94,25 @@ def test_a_worker_stopped_with_sigterm_hands_its_job_back(setup):
     with Session(engine) as db:
         job = get_job(db, job_id)
     assert (job.status, job.attempts, job.stage) == (JobStatus.queued, 0, "re-queued: worker stopped")
+
+
+def test_bodyscan_worker_once_runs_a_real_calibration_job(tmp_path):
+    from measurement.simulate.capture import write_capture
+
+    cap = write_capture(tmp_path / "capture", size=(640, 427), seed=5, scenes=(), poses=6)
+    files = {p.relative_to(cap).as_posix(): p.read_bytes() for p in sorted((cap / "calib").iterdir())}
+    url = f"sqlite:///{tmp_path / 'bodyscan.db'}"
+    engine = migrated_engine(url)
+    with session_scope(engine) as db:
+        cal, job = calibrations.create_calibration(db, json.loads((cap / "rig.json").read_text()), files)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("BODYSCAN_")}
+    env.update(BODYSCAN_DATABASE_URL=url, PYTHONPATH=str(ROOT))
+    out = subprocess.run([sys.executable, "-m", "app.cli", "worker", "--once"], env=env, capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert "ran 1 job(s)" in out.stdout
+    with Session(engine) as db:
+        done, record = get_job(db, job.id), calibrations.get_calibration(db, cal.id)
+    assert done.status == JobStatus.succeeded, done.error
+    assert record.result["image_size"] == [640, 427] and record.result["reprojection_error_px"] < 0.5
+    engine.dispose()
