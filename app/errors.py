@@ -11,7 +11,7 @@ import logging
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
-from sqlalchemy.exc import IntegrityError, OperationalError
+from sqlalchemy.exc import DataError, IntegrityError, OperationalError
 
 from measurement.errors import MeasurementError
 from storage.errors import ConflictError, InvalidInputError, NotFoundError
@@ -55,6 +55,11 @@ def install(app: FastAPI) -> None:
     @app.exception_handler(OverflowError)
     async def overflow(_: Request, exc: OverflowError) -> JSONResponse:
         return _detail(422, "a number in the request is too large (ids and counts are 64-bit integers)")
+
+    @app.exception_handler(DataError)
+    async def data_error(_: Request, exc: DataError) -> JSONResponse:
+        log.info("value refused by the database: %s", exc.orig)
+        return _detail(422, "a value in the request does not fit the database (number too large or text too long)")
 
     @app.exception_handler(IntegrityError)
     async def integrity(_: Request, exc: IntegrityError) -> JSONResponse:

@@ -9,6 +9,7 @@ PostgreSQL tests are skipped with the reason.
 from __future__ import annotations
 
 import atexit
+import contextlib
 import functools
 import io
 import os
@@ -143,3 +144,19 @@ def scan_with_cloud(engine, session_id: int, points, stripe, uv, measurements=No
                                    measurements or {"point_count": len(points)})
         assert finish_job(db, job.id, "test:2")
     return scan.id
+
+
+@contextlib.contextmanager
+def backend_client(backend: str, tmp_path: Path, **overrides):
+    """A TestClient of the app on a fresh SQLite file or PostgreSQL database (dropped afterwards)."""
+    from fastapi.testclient import TestClient
+
+    from app.main import create_app
+
+    url = fresh_postgres_database() if backend == "postgresql" else None
+    try:
+        with TestClient(create_app(settings_for(tmp_path, url, **overrides)), raise_server_exceptions=False) as client:
+            yield client
+    finally:
+        if url:
+            drop_postgres_database(url)

@@ -5,19 +5,17 @@ from __future__ import annotations
 import json
 
 import pytest
-from fastapi.testclient import TestClient
 from sqlmodel import Session, func, select
 
-from app.main import create_app
 from storage.models import Blob, Calibration
-from tests.backend_support import png, settings_for, zip_bytes
+from tests.backend_support import backend_client, png, zip_bytes
 
 RIG = {"board_cols": 9, "board_rows": 6, "square_mm": 25.0, "stripes": 40}
 
 
-@pytest.fixture
-def client(tmp_path):
-    with TestClient(create_app(settings_for(tmp_path, max_upload_mb=1))) as c:
+@pytest.fixture(params=["sqlite", "postgresql"])
+def client(request, tmp_path):
+    with backend_client(request.param, tmp_path, max_upload_mb=1) as c:
         yield c
 
 

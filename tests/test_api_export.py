@@ -6,18 +6,16 @@ import csv
 import io
 
 import pytest
-from fastapi.testclient import TestClient
 
-from app.main import create_app
 from app.routes.export import safe_cell, to_csv
 from storage.db import session_scope
 from storage.measurements import add_measurement
-from tests.backend_support import finished_calibration, settings_for
+from tests.backend_support import backend_client, finished_calibration
 
 
-@pytest.fixture
-def client(tmp_path):
-    with TestClient(create_app(settings_for(tmp_path))) as c:
+@pytest.fixture(params=["sqlite", "postgresql"])
+def client(request, tmp_path):
+    with backend_client(request.param, tmp_path) as c:
         yield c
 
 

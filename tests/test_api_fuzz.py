@@ -8,7 +8,7 @@ import pytest
 from fastapi.testclient import TestClient
 
 from app.main import create_app
-from tests.backend_support import finished_calibration, png, settings_for, zip_bytes
+from tests.backend_support import backend_client, finished_calibration, png, settings_for, zip_bytes
 
 RIG = {"board_cols": "9", "board_rows": "6", "square_mm": "25", "stripes": "40"}
 
@@ -60,8 +60,9 @@ def bad_requests(sid: int, aid: int) -> list[tuple[str, str, dict]]:
     return out
 
 
-def test_bad_requests_get_4xx_and_leave_stored_data_intact(tmp_path):
-    with TestClient(create_app(settings_for(tmp_path, max_upload_mb=2)), raise_server_exceptions=False) as client:
+@pytest.mark.parametrize("backend", ["sqlite", "postgresql"])
+def test_bad_requests_get_4xx_and_leave_stored_data_intact(backend, tmp_path):
+    with backend_client(backend, tmp_path, max_upload_mb=2) as client:
         cal = finished_calibration(client.app.state.engine)
         a = client.post("/api/animals", json={"tag": "KEEP", "species": "cattle"}).json()
         s = client.post("/api/sessions", json={"animal_id": a["id"], "calibration_id": cal}).json()

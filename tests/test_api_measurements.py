@@ -4,18 +4,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from fastapi.testclient import TestClient
 
-from app.main import create_app
 from storage.db import session_scope
 from storage.measurements import add_measurement
-from tests.backend_support import finished_calibration, scan_with_cloud, settings_for
+from tests.backend_support import backend_client, finished_calibration, scan_with_cloud
 from tests.test_surface import DEPTH, RADIUS, cylinder_scan, helix, helix_length, radial_offset
 
 
-@pytest.fixture
-def client(tmp_path):
-    with TestClient(create_app(settings_for(tmp_path))) as c:
+@pytest.fixture(params=["sqlite", "postgresql"])
+def client(request, tmp_path):
+    with backend_client(request.param, tmp_path) as c:
         yield c
 
 

@@ -3,21 +3,19 @@
 from __future__ import annotations
 
 import pytest
-from fastapi.testclient import TestClient
 from sqlmodel import Session, select
 
-from app.main import create_app
 from storage.db import session_scope
 from storage.jobs import claim_next, finish_job
 from storage.models import Scan
-from tests.backend_support import finished_calibration, png, settings_for
+from tests.backend_support import backend_client, finished_calibration, png
 
 RIG = {"board_cols": 9, "board_rows": 6, "square_mm": 25.0, "stripes": 40}
 
 
-@pytest.fixture
-def client(tmp_path):
-    with TestClient(create_app(settings_for(tmp_path))) as c:
+@pytest.fixture(params=["sqlite", "postgresql"])
+def client(request, tmp_path):
+    with backend_client(request.param, tmp_path) as c:
         yield c
 
 
