@@ -56,7 +56,35 @@ def find_corners(gray: np.ndarray, pattern: tuple[int, int], params: BoardParams
     spacing = _corner_spacing(corners, pattern)
     half = int(np.clip(round(spacing * 0.1), 4, 25))  # small windows: lens curvature biases big ones
     refined = cv2.cornerSubPix(img, corners.astype(np.float32).reshape(-1, 1, 2), (half, half), (-1, -1), _SUBPIX)
-    return _canonical_order(refined.reshape(-1, 2).astype(np.float64), pattern)
+    refined = _canonical_order(refined.reshape(-1, 2).astype(np.float64), pattern)
+    if part_of_larger_board(img, refined, pattern):
+        return None
+    return refined
+
+
+def part_of_larger_board(img: np.ndarray, corners: np.ndarray, pattern: tuple[int, int]) -> bool:
+    """True when the squares beyond the detected grid keep alternating black and white on two or more
+    sides: the detector matched a smaller pattern inside a larger board (a wrong board_cols/board_rows)."""
+    cols, rows = pattern
+    g = corners.reshape(rows, cols, 2)
+    h, w = img.shape
+    alternating = 0
+    # (edge corners, outward step) for the four sides; sample the centres of the second square ring
+    sides = [(g[0, :], g[0, :] - g[1, :]), (g[-1, :], g[-1, :] - g[-2, :]),
+             (g[:, 0], g[:, 0] - g[:, 1]), (g[:, -1], g[:, -1] - g[:, -2])]
+    for edge, out in sides:
+        mid = (edge[:-1] + edge[1:]) / 2 + 1.5 * (out[:-1] + out[1:]) / 2
+        inner = (edge[:-1] + edge[1:]) / 2 - 0.5 * (out[:-1] + out[1:]) / 2
+        ok = (mid[:, 0] >= 0) & (mid[:, 0] < w - 1) & (mid[:, 1] >= 0) & (mid[:, 1] < h - 1)
+        if ok.sum() < 3:
+            continue
+        ref = img[inner[:, 1].astype(int).clip(0, h - 1), inner[:, 0].astype(int).clip(0, w - 1)].astype(float)
+        val = img[mid[ok, 1].astype(int), mid[ok, 0].astype(int)].astype(float)
+        contrast = np.ptp(ref) + 1e-6  # black-to-white difference inside the board
+        # alternation: neighbouring samples differ by a large part of the board's own contrast
+        if np.median(np.abs(np.diff(val))) > 0.5 * contrast:
+            alternating += 1
+    return alternating >= 2
 
 
 def _corner_spacing(corners: np.ndarray, pattern: tuple[int, int]) -> float:

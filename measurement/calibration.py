@@ -236,10 +236,12 @@ def calibrate(capture: Capture, intrinsics: Intrinsics | None = None, params: Ca
 def _require_poses(found: dict, reasons: dict, n: int, pattern: tuple[int, int], capture: Capture) -> None:
     if len(found) >= n:
         return
-    if not found and all("not found" in r for r in reasons.values()):
+    missing = [r for r in reasons.values() if "not found" in r]
+    if len(missing) > len(capture.poses) / 2:
+        where = "any" if not found else f"{len(missing)}"
         raise CalibrationError(
-            f"chessboard {pattern[0]}x{pattern[1]} (inner corners) not found in any of the "
-            f"{len(capture.poses)} board images (e.g. {capture.poses[0].board_file}): check board_cols and "
+            f"chessboard {pattern[0]}x{pattern[1]} (inner corners) not found in {where} of the "
+            f"{len(capture.poses)} board images (e.g. {missing[0].split(':')[0]}): check board_cols and "
             "board_rows against the plate")
     listed = "; ".join(reasons.values())
     raise CalibrationError(f"only {len(found)} usable board pose(s), at least {n} needed: {listed}")
