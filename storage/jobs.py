@@ -14,7 +14,7 @@ from sqlalchemy import or_, update
 from sqlalchemy.engine import Engine
 from sqlmodel import Session, select
 
-from .errors import NotFoundError
+from .errors import ConflictError, NotFoundError
 from .models import Calibration, Job, JobKind, JobStatus, Scan, utcnow
 
 TARGETS = {JobKind.calibration.value: Calibration, JobKind.scan.value: Scan}
@@ -32,6 +32,30 @@ def get_job(session: Session, job_id: int) -> Job:
     job = session.get(Job, job_id)
     if job is None:
         raise NotFoundError("job", job_id)
+    return job
+
+
+def list_jobs(session: Session, status: JobStatus | None = None, kind: str | None = None,
+              offset: int = 0, limit: int = 100) -> list[Job]:
+    """Jobs, newest first, optionally of one status and kind."""
+    query = select(Job)
+    if status is not None:
+        query = query.where(Job.status == status)
+    if kind is not None:
+        query = query.where(Job.kind == kind)
+    return list(session.exec(query.order_by(Job.id.desc()).offset(offset).limit(limit)))
+
+
+def retry_job(session: Session, job_id: int) -> Job:
+    """Queue a failed job again with a fresh attempt count (its uploaded data was kept)."""
+    job = get_job(session, job_id)
+    if job.status != JobStatus.failed:
+        raise ConflictError(f"job {job_id} is {job.status}; only failed jobs can be retried")
+    job.status, job.error, job.progress, job.stage = JobStatus.queued, None, 0.0, "queued (retry)"
+    job.attempts, job.worker, job.started_at, job.finished_at, job.heartbeat_at = 0, None, None, None, None
+    session.add(job)
+    _set_target(session, job, JobStatus.queued)
+    session.flush()
     return job
 
 

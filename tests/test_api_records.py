@@ -148,3 +148,28 @@ def test_bad_scan_uploads_are_422_with_a_clear_message(client, files, data, mess
 def test_a_scan_for_an_unknown_session_is_404(client):
     r = client.post("/api/sessions/5/scans", files={"image": ("side.png", png())})
     assert (r.status_code, r.json()["detail"]) == (404, "session 5 not found")
+
+
+def test_failed_jobs_are_listed_and_can_be_retried_on_their_stored_uploads(client):
+    engine = engine_of(client)
+    cal = queued_calibration(client)
+    job = claim_next(engine, "w:1")
+    with session_scope(engine) as db:
+        finish_job(db, job.id, "w:1", error="the job was interrupted 3 times")
+    failed = client.get("/api/jobs", params={"status": "failed"}).json()
+    assert [(j["id"], j["kind"]) for j in failed] == [(job.id, "calibration")]
+    r = client.post(f"/api/jobs/{job.id}/retry")
+    assert r.status_code == 202 and (r.json()["status"], r.json()["attempts"], r.json()["error"]) == ("queued", 0, None)
+    assert client.get(f"/api/calibrations/{cal}").json()["status"] == "queued"
+    r = client.post(f"/api/jobs/{job.id}/retry")
+    assert r.status_code == 409 and "only failed jobs" in r.json()["detail"]
+
+
+def test_the_openapi_document_lists_the_contract_paths(client):
+    paths = client.get("/openapi.json").json()["paths"]
+    for path in ("/api/health", "/api/calibrations", "/api/calibrations/{calibration_id}", "/api/jobs/{job_id}",
+                 "/api/animals", "/api/animals/{animal_id}", "/api/sessions", "/api/sessions/{session_id}",
+                 "/api/sessions/{session_id}/scans", "/api/scans/{scan_id}", "/api/scans/{scan_id}/cloud.ply",
+                 "/api/sessions/{session_id}/measurements", "/api/export/animals.csv"):
+        assert path in paths
+    assert client.get("/docs").status_code == 200
