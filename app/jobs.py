@@ -15,24 +15,18 @@ import signal
 import socket
 import threading
 import time
-from collections.abc import Callable
 
-import numpy as np
 from sqlalchemy.engine import Engine
 from sqlmodel import Session, select
 
 from app.config import Settings, software_version
+from app.tasks import HANDLERS, Apply
 from measurement.errors import MeasurementError
-from storage import calibrations, measurements, sessions
 from storage.db import make_engine, session_scope, upgrade
 from storage.jobs import claim_next, finish_job, heartbeat, release_job, requeue_stale
-from storage.models import Job, JobKind, JobStatus, MeasurementKind
+from storage.models import Job, JobStatus
 
 log = logging.getLogger(__name__)
-
-Report = Callable[[float, str], None]
-Apply = Callable[[Session], None]
-
 
 class JobLost(Exception):
     """The job was re-queued or claimed by another worker while this one was running it."""
@@ -44,96 +38,6 @@ class WorkerStopped(BaseException):
 
 def worker_id() -> str:
     return f"{socket.gethostname()}:{os.getpid()}"
-
-
-# --- handlers ----------------------------------------------------------------------------------------
-
-
-def run_calibration(engine: Engine, job: Job, report: Report) -> Apply:
-    """Calibrate from the stored capture files; returns how to store calibration.json."""
-    from measurement.calibration import calibrate
-    from measurement.capture import RigSettings, capture_from_files, capture_from_zip
-
-    with session_scope(engine) as db:
-        record = calibrations.get_calibration(db, job.result_id)
-        files = calibrations.calibration_files(db, record.id)
-        rig = RigSettings.from_dict(calibrations.rig_of(record))
-    report(0.0, "reading images")
-    if set(files) == {ARCHIVE}:
-        capture = capture_from_zip(files[ARCHIVE], rig)
-    else:
-        capture = capture_from_files(files, rig)
-    result = to_jsonable(calibrate(capture, progress=report).to_dict())
-    return lambda db: calibrations.store_result(db, job.result_id, result)
-
-
-def run_scan(engine: Engine, job: Job, report: Report) -> Apply:
-    """Reconstruct the cloud of a stored scan image; returns how to store cloud and measurements."""
-    from measurement.calibration import load_calibration
-    from measurement.images import decode_image
-    from measurement.pipeline import scan
-
-    with session_scope(engine) as db:
-        record = sessions.get_scan(db, job.result_id)
-        owner = sessions.get_session(db, record.session_id)
-        calibration = calibrations.require_usable(db, owner.calibration_id)
-        image = sessions.scan_image(db, record.id)
-    report(0.05, "decoding image")
-    gray = decode_image(image, record.image_name or f"scan {record.id}")
-    report(0.1, "reconstructing point cloud")
-    result = scan(gray, load_calibration(calibration.result), view=record.view)
-    cloud = {key: getattr(result, key, None) for key in sessions.CLOUD_KEYS}
-    found = to_jsonable(result.measurements)
-
-    def apply(db: Session) -> None:
-        sessions.store_scan_result(db, record.id, cloud, found)
-        for name, value, points in automatic_values(found):
-            measurements.add_measurement(
-                db, session_id=owner.id, scan_id=record.id, calibration_id=calibration.id, name=name,
-                kind=MeasurementKind.automatic.value, method=f"auto:{record.view}", value_mm=value,
-                points=points, created_by="bodyscan", software_version=software_version())
-
-    return apply
-
-
-ARCHIVE = "archive.zip"
-HANDLERS: dict[str, Callable[[Engine, Job, Report], Apply]] = {
-    JobKind.calibration.value: run_calibration,
-    JobKind.scan.value: run_scan,
-}
-
-
-def automatic_values(found: dict) -> list[tuple[str, float, list | None]]:
-    """(name, value in mm, source points) for every ``<name>_mm`` number in a scan's measurements.
-
-    The source points are taken from ``found[<name>]["points"]`` when the pipeline gives them.
-    """
-    out = []
-    for key, value in sorted(found.items()):
-        if not key.endswith("_mm") or isinstance(value, bool) or not isinstance(value, int | float):
-            continue
-        if not np.isfinite(value):
-            continue
-        name = key[: -len("_mm")]
-        detail = found.get(name)
-        points = detail.get("points") if isinstance(detail, dict) else None
-        out.append((name, float(value), points))
-    return out
-
-
-def to_jsonable(value):
-    """numpy scalars/arrays inside dicts and lists -> plain Python, NaN/inf -> None (JSON has neither)."""
-    if isinstance(value, dict):
-        return {str(k): to_jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [to_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return to_jsonable(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not np.isfinite(value):
-        return None
-    return value
 
 
 # --- running one job ---------------------------------------------------------------------------------
@@ -304,9 +208,11 @@ def _install_stop_signals() -> None:
 
 
 def _pool_main(settings_json: str) -> None:
-    logging.basicConfig(level=Settings.model_validate_json(settings_json).log_level.upper(),
-                        format="%(asctime)s %(levelname)s %(processName)s %(name)s: %(message)s")
-    run_worker(Settings.model_validate_json(settings_json))
+    from app.main import configure_logging
+
+    settings = Settings.model_validate_json(settings_json)
+    configure_logging(settings)
+    run_worker(settings)
 
 
 def start_pool(settings: Settings) -> list[multiprocessing.Process]:

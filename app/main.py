@@ -26,7 +26,7 @@ STATIC = Path(__file__).resolve().parents[1] / "static"
 def configure_logging(settings: Settings) -> None:
     """Send bodyscan's log records to stderr at the configured level (only the app entry does this)."""
     logging.basicConfig(level=settings.log_level.upper(),
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+                        format="%(asctime)s %(levelname)s %(processName)s %(name)s: %(message)s")
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:

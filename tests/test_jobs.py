@@ -11,6 +11,7 @@ import pytest
 from sqlmodel import Session, select
 
 from app import jobs as runner
+from app.tasks import automatic_values
 from measurement.errors import CalibrationError
 from storage import calibrations
 from storage.db import session_scope
@@ -182,7 +183,7 @@ def test_a_successful_handler_stores_its_result_with_the_job(engine, tmp_path, m
 def test_automatic_values_are_read_from_the_pipeline_measurements():
     found = {"point_count": 900, "body_length_mm": 1500.5, "body_height_mm": 1200.0, "view": "side",
              "body_length": {"points": [[0, 0, 1], [1500.5, 0, 1]]}, "flag_mm": True, "bad_mm": float("nan")}
-    assert runner.automatic_values(found) == [
+    assert automatic_values(found) == [
         ("body_height", 1200.0, None), ("body_length", 1500.5, [[0, 0, 1], [1500.5, 0, 1]])]
 
 

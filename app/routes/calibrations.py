@@ -9,8 +9,8 @@ from fastapi import APIRouter, File, Form, Query, UploadFile
 
 from app.deps import DbDep, SettingsDep
 from app.errors import BadUpload
-from app.jobs import ARCHIVE
 from app.schemas import Accepted, CalibrationOut
+from app.tasks import ARCHIVE
 from app.uploads import capture_path, read_upload
 from storage import calibrations
 from storage.jobs import job_for
