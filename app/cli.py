@@ -33,10 +33,9 @@ def cmd_simulate(args: argparse.Namespace) -> None:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> None:
-    from measurement.report import write_report
-
     from measurement.calibration import calibrate, load_intrinsics
     from measurement.capture import read_capture
+    from measurement.report import write_report
 
     capture = read_capture(Path(args.capture))
     intr = load_intrinsics(Path(args.intrinsics)) if args.intrinsics else None
@@ -118,8 +117,19 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _quiet_opencv() -> None:
+    """OpenCV prints its own warnings for damaged files; ours already name the file."""
+    try:
+        import cv2
+
+        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)
+    except AttributeError:
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    _quiet_opencv()
     args = build_parser().parse_args(argv)
     try:
         args.func(args)

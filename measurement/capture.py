@@ -39,13 +39,20 @@ class RigSettings:
     def from_dict(cls, d: dict, source: str = "rig.json") -> RigSettings:
         if not isinstance(d, dict):
             raise CaptureError(f"{source}: expected a JSON object")
-        missing = [k for k in ("board_cols", "board_rows", "square_mm", "stripes") if k not in d]
+        missing = [k for k in ("board_cols", "board_rows", "square_mm", "stripes") if d.get(k) is None]
         if missing:
             raise CaptureError(f"{source}: missing field(s) {', '.join(missing)}")
-        try:
-            return cls(int(d["board_cols"]), int(d["board_rows"]), float(d["square_mm"]), int(d["stripes"]))
-        except (TypeError, ValueError) as exc:
-            raise CaptureError(f"{source}: {exc}") from None
+        values = {}
+        for key, kind in (("board_cols", int), ("board_rows", int), ("square_mm", float), ("stripes", int)):
+            v = d[key]
+            try:
+                if isinstance(v, bool) or (kind is int and isinstance(v, float) and not v.is_integer()):
+                    raise ValueError
+                values[key] = kind(v)
+            except (TypeError, ValueError):
+                raise CaptureError(f"{source}: {key} must be a{'n integer' if kind is int else ' number'}, "
+                                   f"got {v!r}") from None
+        return cls(**values)
 
     def to_dict(self) -> dict:
         return {"board_cols": self.board_cols, "board_rows": self.board_rows,

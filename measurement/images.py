@@ -20,12 +20,12 @@ def decode_image(data: bytes, name: str) -> np.ndarray:
     """
     if not data:
         raise ImageError(f"{name}: file is empty")
+    if _looks_truncated(data, name):
+        raise ImageError(f"{name}: image file is truncated")
     buf = np.frombuffer(data, dtype=np.uint8)
     img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH)
     if img is None or img.size == 0:
         raise ImageError(f"{name}: not a readable image (PNG, JPEG, TIFF or BMP expected)")
-    if _looks_truncated(data, name):
-        raise ImageError(f"{name}: image file is truncated")
     return to_gray(img, name)
 
 

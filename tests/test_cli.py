@@ -1,0 +1,60 @@
+"""The `bodyscan` command line: real subprocesses, clear errors, never a traceback."""
+
+import json
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+
+def bodyscan(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "app.cli", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd, timeout=600)
+
+
+def test_simulate_then_calibrate_writes_calibration_json_and_report(tmp_path):
+    cap = tmp_path / "cap"
+    r = bodyscan("simulate", cap, "--size", "800x533", "--poses", "5", "--seed", "3", "--scene", "side")
+    assert r.returncode == 0, r.stderr
+    r = bodyscan("calibrate", cap, "-o", tmp_path / "out" / "calibration.json")
+    assert r.returncode == 0, r.stderr
+    cal = json.loads((tmp_path / "out" / "calibration.json").read_text())
+    assert len(cal["planes"]) == 40 and len(cal["poses"]) == 5
+    assert (tmp_path / "out" / "calibration.png").exists()
+    assert "reprojection error" in r.stdout
+
+
+@pytest.mark.parametrize("damage, message", [
+    ("truncate", "pose_02_board.png: image file is truncated"),
+    ("text", "pose_02_board.png: not a readable image"),
+    ("resize", "pose_02_board.png: image is"),
+    ("rig", "rig.json: stripes must be an integer"),
+])
+def test_bad_captures_give_one_clear_line_and_exit_2(small_capture, tmp_path, damage, message):
+    cap = tmp_path / "cap"
+    shutil.copytree(small_capture, cap)
+    target = cap / "calib" / "pose_02_board.png"
+    if damage == "truncate":
+        target.write_bytes(target.read_bytes()[:5000])
+    elif damage == "text":
+        target.write_bytes(b"not an image at all")
+    elif damage == "resize":
+        import cv2
+
+        cv2.imwrite(str(target), cv2.resize(cv2.imread(str(target)), (500, 300)))
+    else:
+        (cap / "rig.json").write_text(json.dumps({"board_cols": 14, "board_rows": 10, "square_mm": 40,
+                                                  "stripes": 4.5}))
+    r = bodyscan("calibrate", cap, "-o", tmp_path / "c.json")
+    assert r.returncode == 2
+    assert message in r.stderr
+    assert "Traceback" not in r.stderr
+    assert not (tmp_path / "c.json").exists()
+
+
+def test_missing_capture_and_bad_size_flag_are_reported_plainly(tmp_path):
+    r = bodyscan("calibrate", tmp_path / "nowhere")
+    assert r.returncode == 2 and "capture folder not found" in r.stderr and "Traceback" not in r.stderr
+    r = bodyscan("simulate", tmp_path / "x", "--size", "big")
+    assert r.returncode == 2 and "--size must look like" in r.stderr
