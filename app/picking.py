@@ -34,10 +34,10 @@ def surface_of(db: Session, scan_id: int) -> SurfaceMesh:
     cloud = sessions.scan_cloud(db, scan_id)
     if len(cloud["points"]) == 0:
         raise InvalidInputError(f"scan {scan_id} has no points to measure on")
-    uv = cloud.get("uv")
-    if uv is None:  # without image positions order the stripe points by height instead
-        uv = cloud["points"][:, :2]
-    surface = stripe_mesh(cloud["points"], cloud["stripe"], uv)
+    points = cloud["points"]
+    uv = cloud.get("uv", points[:, :2])  # without image positions, order stripe points by height
+    stripe = cloud.get("stripe", np.full(len(points), -1))  # without stripe ids: snap to the points
+    surface = stripe_mesh(points, stripe, uv)
     with _lock:
         _cache[key] = surface
         while len(_cache) > CACHE_SIZE:

@@ -23,11 +23,15 @@ from scipy.spatial import cKDTree
 class MeshParams:
     """Knobs of :func:`stripe_mesh`.
 
-    max_edge_mm : longest triangle edge kept, mm. Larger edges bridge a gap in a stripe, a missing
-        stripe or the step from the body to the background; 40 mm keeps two stripe spacings of ~15 mm.
+    max_edge_mm : longest triangle edge kept, mm; None (default) derives it from the scan as
+        ``edge_factor`` times the median edge between neighbouring stripes. Longer edges would bridge a
+        gap in a stripe, a missing stripe or the step from the body to the background or a leg.
+    edge_factor : the automatic limit in stripe spacings; 2.5 keeps oblique flanks, where the spacing
+        on the surface grows, and drops bridges over a missing stripe.
     """
 
-    max_edge_mm: float = 40.0
+    max_edge_mm: float | None = None
+    edge_factor: float = 2.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,8 +72,13 @@ def stripe_mesh(points: np.ndarray, stripe: np.ndarray, uv: np.ndarray,
     members = {k: _by_row(np.flatnonzero(stripe == k), uv) for k in ids}
     faces = [_zip_strips(members[k], members[k + 1], uv) for k in ids if k + 1 in members]
     faces = np.concatenate(faces) if faces else np.zeros((0, 3), np.int64)
-    faces = faces[_edge_lengths(points, faces).max(axis=1, initial=0.0) <= params.max_edge_mm]
-    return _surface(points, faces)
+    edges = _edge_lengths(points, faces)
+    limit = params.max_edge_mm
+    if limit is None:
+        # Every face's first corner lies on stripe k and its second on k + 1 (see _zip_strips), so
+        # that edge (column 1 of _edge_lengths) is a rung between stripes: its median is the spacing.
+        limit = params.edge_factor * float(np.median(edges[:, 1])) if len(faces) else 0.0
+    return _surface(points, faces[edges.max(axis=1, initial=0.0) <= limit])
 
 
 def snap(points: np.ndarray, surface: SurfaceMesh) -> np.ndarray:
@@ -161,6 +170,7 @@ def _zip_strips(a: np.ndarray, b: np.ndarray, uv: np.ndarray) -> np.ndarray:
 
 
 def _edge_lengths(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F, 3) lengths of the edges v2-v0, v0-v1, v1-v2 of each face, mm."""
     tri = points[faces]
     return np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2)
 

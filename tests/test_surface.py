@@ -118,3 +118,14 @@ def test_inputs_with_wrong_shapes_are_refused_with_the_argument_name():
         snap(np.zeros((2, 2)), stripe_mesh(points, stripe, uv))
     with pytest.raises(ValueError, match="finite"):
         polyline_length(np.array([[0.0, np.nan, 0.0]]))
+
+
+def test_the_automatic_edge_limit_follows_the_stripe_spacing():
+    points, stripe, uv = cylinder_scan()
+    wide = points * [2.0, 1.0, 1.0]  # stripes 30 mm apart: a fixed 40 mm limit would still do, 25 mm not
+    surface = stripe_mesh(wide, stripe, uv)
+    assert len(surface.mesh.faces) == len(stripe_mesh(points, stripe, uv).mesh.faces)
+    assert len(stripe_mesh(wide, stripe, uv, MeshParams(max_edge_mm=25.0)).mesh.faces) == 0
+    keep = stripe != 10  # a missing stripe leaves a hole instead of a bridge
+    holed = stripe_mesh(points[keep], stripe[keep], uv[keep])
+    assert not np.isin(stripe[keep][holed.mesh.faces], [9, 11]).all(axis=1).any()
