@@ -41,19 +41,25 @@ class Calibration:
 def load_calibration(src: str | Path | dict) -> Calibration:
     """Read calibration.json (a path or an already parsed dict); CalibrationError names what is wrong."""
     name = "calibration"
-    if not isinstance(src, dict):
+    if isinstance(src, dict):
+        data = src
+    else:
         name = Path(src).name
         try:
-            src = json.loads(Path(src).read_text())
+            data = json.loads(Path(src).read_text())
         except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise CalibrationError(f"{name}: cannot read calibration ({exc})") from None
+    if not isinstance(data, dict):
+        raise CalibrationError(f"{name}: expected a JSON object")
     try:
-        intr = Intrinsics.from_dict(src)
-        planes = src.get("planes")
-        planes = None if not planes else np.asarray(planes, dtype=np.float64).reshape(-1, 4)
+        intr = Intrinsics.from_dict(data)
+        raw = data.get("planes")
+        planes = None if not raw else np.asarray(raw, dtype=np.float64).reshape(-1, 4)
     except (KeyError, TypeError, ValueError) as exc:
         raise CalibrationError(f"{name}: missing or malformed field ({exc})") from None
-    return Calibration(intr, planes, {k: v for k, v in src.items() if k != "planes"})
+    if planes is not None and not np.all(np.isfinite(planes)):
+        raise CalibrationError(f"{name}: planes hold non-finite numbers")
+    return Calibration(intr, planes, {k: v for k, v in data.items() if k != "planes"})
 
 
 def load_intrinsics(src: str | Path | dict) -> Intrinsics:
@@ -222,14 +228,14 @@ def calibrate(capture: Capture, intrinsics: Intrinsics | None = None, params: Ca
         raise CalibrationError(f"light planes need at least 2 poses showing all {rig.stripes} stripes on the "
                                f"board, found {len(plane_poses)} ({why})")
     report(0.92, f"fitting {rig.stripes} light planes ({params.plane_method})")
-    pts = [np.vstack(g) for g in groups]
-    planes, masks, independent = fit_planes_detailed(pts, params.plane_method)
+    stacked = [np.vstack(g) for g in groups]
+    planes, masks, independent = fit_planes_detailed(stacked, params.plane_method)
     rms = np.array([np.sqrt(np.mean(point_plane_distance(g[m], p) ** 2))
-                    for g, m, p in zip(pts, masks, planes, strict=True)])
+                    for g, m, p in zip(stacked, masks, planes, strict=True)])
     report(1.0, "done")
     return CalibrationResult(**result, planes=planes, plane_error=plane_error_e2(planes),
                              plane_error_unconstrained=plane_error_e2(independent), plane_rms_mm=rms,
-                             plane_points=np.array([len(g) for g in pts]), plane_method=params.plane_method,
+                             plane_points=np.array([len(g) for g in stacked]), plane_method=params.plane_method,
                              seconds=time.perf_counter() - t0)
 
 

@@ -42,7 +42,7 @@ class RigSettings:
         missing = [k for k in ("board_cols", "board_rows", "square_mm", "stripes") if d.get(k) is None]
         if missing:
             raise CaptureError(f"{source}: missing field(s) {', '.join(missing)}")
-        values = {}
+        values: dict = {}
         for key, kind in (("board_cols", int), ("board_rows", int), ("square_mm", float), ("stripes", int)):
             v = d[key]
             try:
@@ -149,8 +149,8 @@ def capture_from_files(files: dict[str, bytes], rig: RigSettings | None = None) 
     for name in sorted(boards, key=lambda n: int(n.split("_")[1])):
         bname, bdata = boards[name]
         sname, sdata = stripes.get(name, (None, None))
-        poses.append(Pose(name, bname, decode_image(bdata, bname), sname,
-                          decode_image(sdata, sname) if sdata is not None else None))
+        stripes_img = decode_image(sdata, sname) if sdata is not None and sname is not None else None
+        poses.append(Pose(name, bname, decode_image(bdata, bname), sname, stripes_img))
     if not poses and not scans:
         raise CaptureError("capture holds no calib/pose_NN_board images and no scan images")
     _check_sizes(poses)

@@ -60,6 +60,8 @@ def to_float(img: np.ndarray) -> np.ndarray:
     """Scale an 8- or 16-bit gray image to float32 in the 0..255 range (16-bit is divided by 257)."""
     if img.dtype == np.uint16:
         return img.astype(np.float32) * (1.0 / 257.0)
+    if img.dtype == np.float32:
+        return img
     return img.astype(np.float32)
 
 

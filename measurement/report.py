@@ -14,7 +14,7 @@ _W, _H = 1200, 760
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
 
 
-def _bars(canvas: np.ndarray, box: tuple[int, int, int, int], values: list[float], labels: list[str],
+def _bars(canvas: np.ndarray, box: tuple[int, int, int, int], values: list, labels: list[str],
           title: str, unit: str, colours: list[tuple[int, int, int]]) -> None:
     x0, y0, x1, y1 = box
     cv2.putText(canvas, title, (x0, y0 - 12), _FONT, 0.6, (20, 20, 20), 1, cv2.LINE_AA)
@@ -46,7 +46,7 @@ def render_report(result: CalibrationResult) -> np.ndarray:
     head = (f"E1 = {result.reprojection_error_px:.4f} px   fx = {k.fx:.2f}  fy = {k.fy:.2f}  "
             f"cx = {k.cx:.2f}  cy = {k.cy:.2f}")
     cv2.putText(canvas, head, (30, 36), _FONT, 0.65, (0, 0, 0), 1, cv2.LINE_AA)
-    if result.planes is not None:
+    if result.planes is not None and result.plane_rms_mm is not None:
         line2 = (f"{len(result.planes)} light planes ({result.plane_method}), E2 = {result.plane_error:.3g} "
                  f"(independent fits {result.plane_error_unconstrained:.3g}), "
                  f"median plane residual {np.median(result.plane_rms_mm):.3f} mm")
@@ -57,7 +57,7 @@ def render_report(result: CalibrationResult) -> np.ndarray:
     _bars(canvas, (40, 120, 1080, 380), [p.reprojection_error_px for p in poses],
           [p.name.replace("pose_", "") for p in poses], "Reprojection error per pose (blue: camera + planes, "
           "green: camera only, red line: skipped)", "px", colours)
-    if result.planes is not None:
+    if result.planes is not None and result.plane_rms_mm is not None:
         n = len(result.planes)
         _bars(canvas, (40, 460, 1080, 700), list(result.plane_rms_mm), [str(i) for i in range(n)],
               "RMS distance of each stripe's board points to its light plane", "mm", [(40, 120, 200)] * n)

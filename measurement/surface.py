@@ -70,8 +70,8 @@ def stripe_mesh(points: np.ndarray, stripe: np.ndarray, uv: np.ndarray,
         raise ValueError(f"uv must have shape ({len(points)}, 2), got {uv.shape}")
     ids = np.unique(stripe[stripe >= 0])
     members = {k: _by_row(np.flatnonzero(stripe == k), uv) for k in ids}
-    faces = [_zip_strips(members[k], members[k + 1], uv) for k in ids if k + 1 in members]
-    faces = np.concatenate(faces) if faces else np.zeros((0, 3), np.int64)
+    strips = [_zip_strips(members[k], members[k + 1], uv) for k in ids if k + 1 in members]
+    faces = np.concatenate(strips) if strips else np.zeros((0, 3), np.int64)
     edges = _edge_lengths(points, faces)
     limit = params.max_edge_mm
     if limit is None:

@@ -98,7 +98,7 @@ def quadruped(length_mm: float = 300.0, seed: int = 0) -> Animal:
     ])
     tail_r = (22 - 14 * t) * s
     parts.append(_tube(tail, tail_r))
-    mesh = trimesh.util.concatenate(parts)
+    mesh: trimesh.Trimesh = trimesh.util.concatenate(parts)  # type: ignore[assignment]
     neck_mid = (neck0 + neck1) / 2
     axis = (neck1 - neck0) / np.linalg.norm(neck1 - neck0)
     up = np.array([-axis[1], axis[0], 0.0])
@@ -124,8 +124,8 @@ def from_mesh(path: str, length_mm: float = 600.0) -> Animal:
 
     The mesh's up axis is guessed as the bounding-box axis that is neither the longest nor ... the
     shortest horizontal one: y if the file is y-up (most OBJ exports), else z."""
-    loaded = trimesh.load(path, force="mesh")
-    v = np.asarray(loaded.vertices, float)
+    loaded: trimesh.Trimesh = trimesh.load(path, force="mesh")  # type: ignore[assignment]
+    v = np.asarray(loaded.vertices, dtype=np.float64)
     ext = v.max(axis=0) - v.min(axis=0)
     if ext[2] > ext[1] and ext[2] < ext[0] and "z-up" in path:
         v = v[:, [0, 2, 1]] * [1, 1, -1]

@@ -124,7 +124,7 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
         cv2.imwrite(str(out / "calib" / f"{name}_stripes.png"), stripe_img)
         truth["board_poses"].append({"name": name, "R": R.tolist(), "t": t.tolist(), "defect": defects.get(i)})
         st = stripe_truth(hits, stripe, rig, surfaces)
-        np.savez_compressed(out / "truth" / f"{name}_stripes.npz", **st)
+        np.savez_compressed(out / "truth" / f"{name}_stripes.npz", **st)  # type: ignore[arg-type]
     animal = from_mesh(mesh) if mesh else quadruped(seed=seed)
     for view in scenes:
         _write_view(out, view, animal, rig, rays_xy, fur, seed, rng, truth)
@@ -143,7 +143,7 @@ def _write_view(out: Path, view: str, animal: Animal, rig: Rig, rays_xy: np.ndar
     cv2.imwrite(str(out / "scan" / f"{view}.png"), img)
     cv2.imwrite(str(out / "scan" / f"{view}_ambient.png"), amb)
     st = stripe_truth(hits, stripe, rig, surfaces)
-    np.savez_compressed(out / "truth" / f"{view}_stripes.npz", **st)
+    np.savez_compressed(out / "truth" / f"{view}_stripes.npz", **st)  # type: ignore[arg-type]
     mesh_cam = surfaces[0]
     trimesh.Trimesh(mesh_cam.vertices, mesh_cam.faces, process=False).export(out / "truth" / f"{view}_animal.ply")
     truth["views"][view] = {"R_cam_world": R.tolist(), "t_cam_world": t.tolist(), "fur": fur,

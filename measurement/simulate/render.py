@@ -135,12 +135,11 @@ def _fur(stripes: np.ndarray, animal: np.ndarray, scale: float, rng: np.random.G
     s = stripes.astype(np.float32)
     halo = cv2.GaussianBlur(s, (0, 0), 3.0 * max(scale, 0.3))
     fur = 0.55 * s + 0.45 * halo * 1.6
-    speck = rng.gamma(3.0, 1 / 3.0, (h, w)).astype(np.float32)
-    speck = cv2.GaussianBlur(speck, (0, 0), 0.7 * max(scale, 0.5))
+    speck = cv2.GaussianBlur(rng.gamma(3.0, 1 / 3.0, (h, w)).astype(np.float32), (0, 0), 0.7 * max(scale, 0.5))
     fur *= speck
     small = (max(h // 24, 4), max(w // 24, 4))
     blobs = cv2.resize(rng.standard_normal(small).astype(np.float32), (w, h), interpolation=cv2.INTER_CUBIC)
-    fur *= np.where(blobs > 1.8, 0.2, 1.0)
+    fur *= np.where(blobs > 1.8, 0.2, 1.0).astype(np.float32)
     n_specks = int(400 * scale * scale) + 20
     ys = rng.integers(0, h, n_specks)
     xs = rng.integers(0, w, n_specks)
