@@ -50,11 +50,12 @@ def run_scan(engine: Engine, job: Job, report: Report) -> Apply:
         record = sessions.get_scan(db, job.result_id)
         owner = sessions.get_session(db, record.session_id)
         calibration = calibrations.require_usable(db, owner.calibration_id)
-        image = sessions.scan_image(db, record.id)
+        image, ambient = sessions.scan_image(db, record.id), sessions.scan_ambient(db, record.id)
     report(0.05, "decoding image")
     gray = decode_image(image, record.image_name or f"scan {record.id}")
+    dark = decode_image(ambient, f"ambient image of scan {record.id}") if ambient is not None else None
     report(0.1, "reconstructing point cloud")
-    result = scan(gray, load_calibration(calibration.result), view=record.view)
+    result = scan(gray, load_calibration(calibration.result), view=record.view, ambient=dark)
     cloud = {key: getattr(result, key, None) for key in sessions.CLOUD_KEYS}
     found = to_jsonable(result.measurements)
 

@@ -207,6 +207,8 @@ class Scan(SQLModel, table=True):
     view: str = Field(max_length=16)
     image_name: str = Field(default="", max_length=255)
     image_blob_id: int = Field(foreign_key="blob.id")
+    ambient_blob_id: int | None = Field(default=None, foreign_key="blob.id",
+                                        description="optional image with the projector off")
     cloud_blob_id: int | None = Field(default=None, foreign_key="blob.id")
     status: JobStatus = Field(default=JobStatus.queued, sa_type=String(16))
     error: str | None = Field(default=None, max_length=4000)

@@ -45,12 +45,16 @@ def list_sessions(session: Session, animal_id: int | None = None, offset: int = 
     return list(session.exec(query.offset(offset).limit(limit)))
 
 
-def create_scan(session: Session, session_id: int, view: str, image_name: str, image: bytes) -> tuple[Scan, Job]:
-    """Store a scan image of a session and queue its scan job; the calibration must have succeeded."""
+def create_scan(session: Session, session_id: int, view: str, image_name: str, image: bytes,
+                ambient: bytes | None = None) -> tuple[Scan, Job]:
+    """Store a scan image (and optional ambient image) of a session and queue its scan job; the
+    session's calibration must have succeeded."""
     record = get_session(session, session_id)
     require_usable(session, record.calibration_id)
     blob = put_blob(session, image)
-    scan = Scan(session_id=session_id, view=view, image_name=image_name, image_blob_id=blob.id)
+    ambient_id = put_blob(session, ambient).id if ambient is not None else None
+    scan = Scan(session_id=session_id, view=view, image_name=image_name, image_blob_id=blob.id,
+                ambient_blob_id=ambient_id)
     session.add(scan)
     session.flush()
     return scan, enqueue(session, JobKind.scan, scan.id)
@@ -69,6 +73,12 @@ def scans_of(session: Session, session_id: int) -> list[Scan]:
 
 def scan_image(session: Session, scan_id: int) -> bytes:
     return get_bytes(session, get_scan(session, scan_id).image_blob_id)
+
+
+def scan_ambient(session: Session, scan_id: int) -> bytes | None:
+    """The ambient (projector off) image of a scan, None when none was uploaded."""
+    blob_id = get_scan(session, scan_id).ambient_blob_id
+    return None if blob_id is None else get_bytes(session, blob_id)
 
 
 def store_scan_result(session: Session, scan_id: int, cloud: dict[str, np.ndarray], measurements: dict) -> Scan:

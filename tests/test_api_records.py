@@ -173,3 +173,18 @@ def test_the_openapi_document_lists_the_contract_paths(client):
                  "/api/sessions/{session_id}/measurements", "/api/export/animals.csv"):
         assert path in paths
     assert client.get("/docs").status_code == 200
+
+
+def test_an_ambient_image_is_kept_with_the_scan_and_must_match_its_size(client):
+    s = session_for(client, finished_calibration(engine_of(client)))
+    files = {"image": ("side.png", png(640, 427)), "ambient": ("side_ambient.png", png(320, 240))}
+    r = client.post(f"/api/sessions/{s['id']}/scans", files=files, data={"view": "side"})
+    assert r.status_code == 422 and "side_ambient.png: the ambient image must have the size of side.png" in r.json()["detail"]
+    dark = png(640, 427, value=30)
+    files["ambient"] = ("side_ambient.png", dark)
+    r = client.post(f"/api/sessions/{s['id']}/scans", files=files, data={"view": "side"})
+    assert r.status_code == 202, r.text
+    with Session(engine_of(client)) as db:
+        from storage.sessions import scan_ambient
+
+        assert scan_ambient(db, r.json()["id"]) == dark

@@ -48,6 +48,8 @@ def upload_scan(
     settings: SettingsDep,
     image: Annotated[UploadFile, File(description="the stripe image of the animal (PNG, TIFF, JPEG, BMP)")],
     view: Annotated[str, Form(description="side, top, front or back")] = "side",
+    ambient: Annotated[UploadFile | None, File(description="optional: the same view with the projector off; "
+                                                           "evens out fur and skin colour")] = None,
 ):
     """Store the image and queue the scan job; the session's calibration must have succeeded (409)."""
     from measurement.images import decode_image
@@ -56,12 +58,23 @@ def upload_scan(
         raise BadUpload(f"view {view!r} unknown; choose side, top, front or back")
     record = sessions.get_session(db, session_id)
     calibration = require_usable(db, record.calibration_id)
-    name = (image.filename or "image").replace("\\", "/").rsplit("/", 1)[-1]
+    name = _base_name(image.filename, "image")
     data = read_upload(image, settings.max_upload_bytes, "image")
     gray = decode_image(data, name)
     size = (calibration.result or {}).get("image_size")
     if size and [gray.shape[1], gray.shape[0]] != list(size):
         raise BadUpload(f"{name}: image is {gray.shape[1]}x{gray.shape[0]} but calibration {calibration.id} "
                         f"was made with {size[0]}x{size[1]} images from the same camera")
-    scan, job = sessions.create_scan(db, session_id, view, name, data)
+    dark = None
+    if ambient is not None and (ambient.filename or ambient.size):  # browsers send an empty part for none
+        dark_name = _base_name(ambient.filename, "ambient")
+        dark = read_upload(ambient, settings.max_upload_bytes, "ambient")
+        if decode_image(dark, dark_name).shape != gray.shape:
+            raise BadUpload(f"{dark_name}: the ambient image must have the size of {name} "
+                            f"({gray.shape[1]}x{gray.shape[0]})")
+    scan, job = sessions.create_scan(db, session_id, view, name, data, dark)
     return Accepted(id=scan.id, job_id=job.id)
+
+
+def _base_name(filename: str | None, default: str) -> str:
+    return (filename or default).replace("\\", "/").rsplit("/", 1)[-1] or default
