@@ -83,17 +83,31 @@ def postgres_server() -> tuple[str | None, str]:
     return normalize_url(url), ""
 
 
-def fresh_postgres_database() -> str:
-    """URL of a new, empty database on the test server (skips the test when there is no server)."""
+def fresh_postgres_database(migrated: bool = False) -> str:
+    """URL of a new database on the test server, empty or (copied from a template) at the newest schema.
+
+    Skips the test when there is no server.
+    """
     server, reason = postgres_server()
     if server is None:
         pytest.skip(reason)
     name = f"t_{uuid.uuid4().hex[:12]}"
+    template = f' TEMPLATE "{_migrated_template()}"' if migrated else ""
     admin = create_engine(server, isolation_level="AUTOCOMMIT")
     with admin.connect() as conn:
-        conn.execute(text(f'CREATE DATABASE "{name}"'))
+        conn.execute(text(f'CREATE DATABASE "{name}"{template}'))
     admin.dispose()
     return make_url(server).set(database=name).render_as_string(hide_password=False)
+
+
+@functools.cache
+def _migrated_template() -> str:
+    """A database at the newest schema to copy from (migrating each test database costs ~0.5 s)."""
+    url = fresh_postgres_database()
+    engine = migrated_engine(url)
+    engine.dispose()  # a template must have no open connections
+    atexit.register(drop_postgres_database, url)
+    return make_url(url).database
 
 
 def drop_postgres_database(url: str) -> None:
@@ -153,7 +167,7 @@ def backend_client(backend: str, tmp_path: Path, **overrides):
 
     from app.main import create_app
 
-    url = fresh_postgres_database() if backend == "postgresql" else None
+    url = fresh_postgres_database(migrated=True) if backend == "postgresql" else None
     try:
         with TestClient(create_app(settings_for(tmp_path, url, **overrides)), raise_server_exceptions=False) as client:
             yield client
