@@ -15,6 +15,7 @@ import signal
 import socket
 import threading
 import time
+import uuid
 
 from sqlalchemy.engine import Engine
 from sqlmodel import Session, select
@@ -27,6 +28,8 @@ from storage.jobs import claim_next, finish_job, heartbeat, release_job, requeue
 from storage.models import Job, JobStatus
 
 log = logging.getLogger(__name__)
+_TOKEN = uuid.uuid4().hex[:6]  # tells this process from an earlier one that had the same pid (containers)
+
 
 class JobLost(Exception):
     """The job was re-queued or claimed by another worker while this one was running it."""
@@ -37,7 +40,8 @@ class WorkerStopped(BaseException):
 
 
 def worker_id() -> str:
-    return f"{socket.gethostname()}:{os.getpid()}"
+    """``host:pid:token`` of this process, stored with the jobs it claims."""
+    return f"{socket.gethostname()}:{os.getpid()}:{_TOKEN}"
 
 
 # --- running one job ---------------------------------------------------------------------------------
@@ -131,13 +135,17 @@ def reap(engine: Engine, settings: Settings) -> list[int]:
 
 
 def _dead_local(engine: Engine) -> list[str]:
-    host = socket.gethostname()
+    """Workers of running jobs that were on this host and whose process is gone."""
+    host, me = socket.gethostname(), worker_id()
     with Session(engine) as db:
         running = db.exec(select(Job.worker).where(Job.status == JobStatus.running)).all()
     dead = []
-    for name in set(filter(None, running)):
-        wh, _, pid = name.rpartition(":")
-        if wh == host and pid.isdigit() and int(pid) != os.getpid() and not _alive(int(pid)):
+    for name in set(filter(None, running)) - {me}:
+        parts = name.split(":")
+        if len(parts) != 3 or parts[0] != host or not parts[1].isdigit():
+            continue
+        pid = int(parts[1])
+        if pid == os.getpid() or not _alive(pid):  # our own pid under another token: an earlier life
             dead.append(name)
     return dead
 

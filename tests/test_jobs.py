@@ -124,7 +124,7 @@ def test_jobs_of_a_dead_process_on_this_host_are_requeued_when_a_worker_starts(e
     proc = multiprocessing.get_context("spawn").Process(target=os.getpid)
     proc.start()
     proc.join()
-    claim_next(engine, f"{socket.gethostname()}:{proc.pid}")
+    claim_next(engine, f"{socket.gethostname()}:{proc.pid}:abcdef")
     assert runner.reap(engine, settings_for(tmp_path)) == [jid]
     assert job(engine, jid).status == JobStatus.queued
 
@@ -195,3 +195,13 @@ def test_unknown_job_kinds_fail_cleanly(engine, tmp_path):
     with Session(engine) as db:
         assert "unknown job kind 'mystery'" in db.exec(select(Job)).first().error
         assert db.get(Calibration, record.id).status == JobStatus.queued  # untouched: no handler ran
+
+
+def test_a_job_of_an_earlier_process_with_our_pid_is_requeued(engine, tmp_path):
+    (jid,) = queue_calibrations(engine, 1)
+    claim_next(engine, f"{socket.gethostname()}:{os.getpid()}:000000")  # e.g. PID 1 of a restarted container
+    assert runner.reap(engine, settings_for(tmp_path)) == [jid]
+    (other,) = queue_calibrations(engine, 1)
+    claim_next(engine, runner.worker_id())  # our own running job is left alone
+    assert runner.reap(engine, settings_for(tmp_path)) == []
+    assert job(engine, other).status == JobStatus.running
