@@ -201,7 +201,7 @@ def test_a_job_of_an_earlier_process_with_our_pid_is_requeued(engine, tmp_path):
     (jid,) = queue_calibrations(engine, 1)
     claim_next(engine, f"{socket.gethostname()}:{os.getpid()}:000000")  # e.g. PID 1 of a restarted container
     assert runner.reap(engine, settings_for(tmp_path)) == [jid]
-    (other,) = queue_calibrations(engine, 1)
-    claim_next(engine, runner.worker_id())  # our own running job is left alone
+    mine = claim_next(engine, runner.worker_id())  # our own running job is left alone
+    assert mine.id == jid
     assert runner.reap(engine, settings_for(tmp_path)) == []
-    assert job(engine, other).status == JobStatus.running
+    assert job(engine, jid).status == JobStatus.running
