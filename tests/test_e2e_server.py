@@ -169,8 +169,9 @@ def test_technician_workflow_over_http(server, capture):
 
         # scan
         image = (capture / "scan" / "side.png").read_bytes()
-        r = api.post(f"/api/sessions/{session['id']}/scans", files={"image": ("side.png", image, "image/png")},
-                     data={"view": "side"})
+        ambient = (capture / "scan" / "side_ambient.png").read_bytes()
+        r = api.post(f"/api/sessions/{session['id']}/scans", data={"view": "side"},
+                     files={"image": ("side.png", image, "image/png"), "ambient": ("side_ambient.png", ambient)})
         assert r.status_code == 202, r.text
         scan_id, job = r.json()["id"], finished_job(api, r.json()["job_id"])
         assert job["status"] == "succeeded", job
