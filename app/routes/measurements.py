@@ -21,10 +21,11 @@ def add_measurement(session_id: int, data: MeasurementCreate, db: DbDep, setting
     record = sessions.get_session(db, session_id)
     fields = dict(session_id=session_id, name=data.name.strip(), note=data.note, created_by=data.created_by,
                   software_version=software_version(), calibration_id=record.calibration_id)
+    if data.scan_id is not None:
+        _check_scan_of(db, session_id, data.scan_id)
     if data.kind == "manual":
         return measurements.add_measurement(db, **fields, kind=MeasurementKind.manual.value, method="tape",
-                                            value_mm=data.value_mm, scan_id=data.scan_id and _scan_of(db, session_id, data.scan_id))
-    _scan_of(db, session_id, data.scan_id)
+                                            value_mm=data.value_mm, scan_id=data.scan_id)
     value, snapped = measure(db, data.scan_id, data.kind, data.points, settings)
     return measurements.add_measurement(db, **fields, kind=MeasurementKind.picked.value, method=data.kind,
                                         scan_id=data.scan_id, value_mm=value, points=snapped,
@@ -80,8 +81,7 @@ def delete_measurement(measurement_id: int, db: DbDep, by: str = "", note: str =
     return Response(status_code=204)
 
 
-def _scan_of(db, session_id: int, scan_id: int) -> int:
+def _check_scan_of(db, session_id: int, scan_id: int) -> None:
     scan = sessions.get_scan(db, scan_id)
     if scan.session_id != session_id:
         raise InvalidInputError(f"scan {scan_id} belongs to session {scan.session_id}, not to session {session_id}")
-    return scan_id
