@@ -28,13 +28,14 @@ class StripeParams:
                     "midpoint", "weighted" (intensity-weighted centroid) or "gaussian" (3-point log-parabola)
     rel_threshold : a pixel belongs to a stripe above this fraction of the local maximum
     min_rows      : a pose counts when at least this many rows hold all N stripes ...
-    min_row_frac  : ... and at least this fraction of the board's rows do
+    min_row_frac  : ... and at least this fraction of the board's rows do; those rows fix the labels,
+                    which then follow each stripe into rows where some stripes were missed
     """
 
     method: str = "weighted"
     rel_threshold: float = 0.5
-    min_rows: int = 20
-    min_row_frac: float = 0.12
+    min_rows: int = 15
+    min_row_frac: float = 0.03
 
 
 @dataclass(frozen=True, eq=False)
@@ -298,10 +299,9 @@ def _detect_in(stripes_img: np.ndarray, board_img: np.ndarray | None, region: np
     u = _centres(img, rows, c0, c1, params.method)
     counts = np.bincount(rows, minlength=img.shape[0])
     full = counts[rows] == n_stripes
-    rows, u = rows[full], u[full]
-    rows, u, k = _regular_rows(rows, u, n_stripes, spacing)
+    seed_rows, seed_u, seed_k = _regular_rows(rows[full], u[full], n_stripes, spacing)
     region_rows = int(region.any(axis=1).sum())
-    used = len(np.unique(rows))
+    used = len(np.unique(seed_rows))
     if used == 0 and counts.max(initial=0) == 0:
         raise StripeDetectionError(f"{name}: no stripes found on the board")
     if used < max(params.min_rows, params.min_row_frac * region_rows):
@@ -309,7 +309,43 @@ def _detect_in(stripes_img: np.ndarray, board_img: np.ndarray | None, region: np
         raise StripeDetectionError(
             f"{name}: only {used} of {region_rows} board rows show all {n_stripes} stripes "
             f"(most rows show {most}): part of the pattern misses the plate, or the stripe count is wrong")
+    if params.method == "paper":
+        rows, u, k = seed_rows, seed_u, seed_k
+    else:
+        rows, u, k = _extend_labels(rows, u, seed_rows, seed_u, seed_k, n_stripes, spacing)
     return BoardStripes(np.column_stack([u, rows.astype(np.float64)]), k, used, region_rows, spacing)
+
+
+def _extend_labels(rows, u, seed_rows, seed_u, seed_k, n: int, spacing: float):
+    """Label centres in rows that miss some stripes (dim stripes on black squares, noise) by following
+    each stripe from the complete rows: a stripe on the flat board is a smooth curve u_k(v), fitted and
+    re-fitted as labelled centres accumulate; a centre joins stripe k when it lies within a fifth of the
+    spacing of the prediction and no other centre of its row claims k."""
+    lab_rows, lab_u, lab_k = seed_rows, seed_u, seed_k
+    v = rows.astype(np.float64)
+    vmid = float(np.median(v)) if len(v) else 0.0
+    tol = 0.2 * spacing
+    for _ in range(3):
+        span = np.ptp(lab_rows) if len(lab_rows) else 0
+        deg = 2 if span > 200 else 1 if span > 10 else 0
+        coef = np.zeros((n, 3))
+        for kk in range(n):
+            sel = lab_k == kk
+            if sel.sum() > deg:
+                coef[kk, 3 - deg - 1:] = np.polyfit(lab_rows[sel] - vmid, lab_u[sel], deg)
+            else:
+                coef[kk, 2] = np.nan
+        dv = v - vmid
+        pred = coef[:, 0][None] * dv[:, None] ** 2 + coef[:, 1][None] * dv[:, None] + coef[:, 2][None]
+        dist = np.abs(pred - u[:, None])
+        best = np.nanargmin(np.where(np.isnan(dist), np.inf, dist), axis=1)
+        ok = dist[np.arange(len(u)), best] < tol
+        # one centre per stripe per row: drop both when two claim the same stripe
+        key = rows.astype(np.int64) * (n + 1) + best
+        uniq, cnt = np.unique(key[ok], return_counts=True)
+        ok &= ~np.isin(key, uniq[cnt > 1])
+        lab_rows, lab_u, lab_k = rows[ok], u[ok], best[ok].astype(np.int32)
+    return lab_rows, lab_u, lab_k
 
 
 def _regular_rows(rows: np.ndarray, u: np.ndarray, n: int, spacing: float):

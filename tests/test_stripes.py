@@ -71,3 +71,20 @@ def test_vectorised_otsu_splits_two_clusters():
     rows = np.array([[1, 2, 1, 2, 9, 10, 9, 10], [0, 0, 0, 0, 0, 5, 5, 5]], float)
     t = _otsu_rows(rows)
     assert 2 < t[0] < 9 and 0 < t[1] < 5
+
+
+def test_stripes_missing_in_some_rows_do_not_cost_the_other_stripes_there(small_capture):
+    board, stripes, corners = _pose(small_capture)
+    full = detect_board_stripes(stripes, board, corners, (14, 10), 40)
+    band = (full.uv[:, 1] > np.percentile(full.uv[:, 1], 40)) & (full.uv[:, 1] < np.percentile(full.uv[:, 1], 60))
+    rows = np.unique(full.uv[band, 1]).astype(int)
+    # erase stripe 7 in a band of rows, as if it fell on a black square too dark to see
+    damaged = stripes.copy()
+    u7 = full.uv[band & (full.stripe == 7), 0]
+    damaged[rows.min():rows.max() + 1, int(u7.min()) - 6:int(u7.max()) + 7] = 0
+    found = detect_board_stripes(damaged, board, corners, (14, 10), 40)
+    in_band = (found.uv[:, 1] >= rows.min()) & (found.uv[:, 1] <= rows.max())
+    assert not (in_band & (found.stripe == 7)).any()
+    assert (in_band & (found.stripe == 20)).sum() > 0.9 * len(rows)  # the other stripes keep their rows
+    err, matched = _errors(found, small_capture)
+    assert matched.mean() > 0.995 and np.abs(err).max() < 2.0
