@@ -4,7 +4,7 @@ import pytest
 from measurement.board import find_corners
 from measurement.errors import StripeDetectionError
 from measurement.images import read_image
-from measurement.stripes import StripeParams, _otsu_rows, detect_board_stripes
+from measurement.stripes import StripeParams, _otsu_rows, detect_board_stripes, room_light_ratio
 
 
 def _pose(capture, name="pose_02"):
@@ -81,10 +81,13 @@ def test_stripes_missing_in_some_rows_do_not_cost_the_other_stripes_there(small_
     # erase stripe 7 in a band of rows, as if it fell on a black square too dark to see
     damaged = stripes.copy()
     u7 = full.uv[band & (full.stripe == 7), 0]
-    damaged[rows.min():rows.max() + 1, int(u7.min()) - 6:int(u7.max()) + 7] = 0
+    box = (slice(rows.min(), rows.max() + 1), slice(int(u7.min()) - 6, int(u7.max()) + 7))
+    ratio = room_light_ratio(stripes.astype(np.float32), board.astype(np.float32), None)
+    damaged[box] = np.clip(board[box] * ratio, 0, 255).astype(np.uint8)  # room light only, no stripe
     found = detect_board_stripes(damaged, board, corners, (14, 10), 40)
-    in_band = (found.uv[:, 1] >= rows.min()) & (found.uv[:, 1] <= rows.max())
+    # (the detector smooths along the stripes, so the band's first and last few rows still see stripe 7)
+    in_band = (found.uv[:, 1] >= rows.min() + 6) & (found.uv[:, 1] <= rows.max() - 6)
     assert not (in_band & (found.stripe == 7)).any()
-    assert (in_band & (found.stripe == 20)).sum() > 0.9 * len(rows)  # the other stripes keep their rows
+    assert (in_band & (found.stripe == 20)).sum() > 0.9 * (len(rows) - 12)  # the others keep their rows
     err, matched = _errors(found, small_capture)
     assert matched.mean() > 0.995 and np.abs(err).max() < 2.0
