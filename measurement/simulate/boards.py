@@ -26,6 +26,8 @@ class Board:
     rows: int = 10
     square_mm: float = 40.0
     margin_mm: float = 60.0
+    white: float = WHITE
+    black: float = BLACK
 
     def object_points(self) -> np.ndarray:
         """(cols*rows, 3) float64 mm, in OpenCV's corner order (row by row)."""
@@ -70,9 +72,9 @@ def board_surface(board: Board, R: np.ndarray, t: np.ndarray, fx: float) -> Plan
         fp = points[:, 2] / fx * 1.2  # pixel footprint on the plate, mm
         # the first inner corner sits between squares: cell (0, 0) starts at the corner
         checker = _smooth_sign(b[:, 0], s, fp) * _smooth_sign(b[:, 1], s, fp)
-        a = (WHITE + BLACK) / 2 - (WHITE - BLACK) / 2 * checker
+        a = (board.white + board.black) / 2 - (board.white - board.black) / 2 * checker
         in_sq = (b[:, 0] >= sx0) & (b[:, 0] <= sx1) & (b[:, 1] >= sy0) & (b[:, 1] <= sy1)
-        return np.where(in_sq, a, WHITE)
+        return np.where(in_sq, a, board.white)
 
     return PlaneSurface(normal, float(normal @ t), "board", albedo, inside)
 

@@ -91,11 +91,15 @@ def calibration_scene(board: Board, R: np.ndarray, t: np.ndarray, fx: float) -> 
 def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] = (3072, 2048), seed: int = 0,
                   scenes: tuple[str, ...] = ("side", "top"), poses: int = 12, mesh: str | None = None,
                   fur: bool = True, board: Board | None = None, defects: dict[int, str] | None = None,
-                  rig: Rig | None = None) -> Path:
+                  rig: Rig | None = None, light: dict | None = None) -> Path:
     """Render a complete capture (calibration poses + animal views) with ground truth; returns ``out_dir``.
 
     defects : {pose number (1-based): "no_board" | "no_stripes"} renders deliberately unusable poses.
+    light   : overrides of Lighting fields for every exposure (e.g. {"read_noise": 4.0, "gain": 0.8}),
+              plus "stripe_ambient" to set the room light of the calibration stripe images.
     """
+    light = dict(light or {})
+    stripe_ambient = light.pop("stripe_ambient", None)
     out = Path(out_dir)
     for view in scenes:
         if view not in VIEW_CAMERAS:
@@ -117,9 +121,11 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
             surfaces = surfaces[1:]
         hits = trace(surfaces, rig.intrinsics, rays_xy)
         irr, stripe = stripe_irradiance(hits, rig, surfaces)
-        board_img = expose(hits, surfaces, rig, Lighting(ambient=rng.uniform(100, 130), stripes_on=False), rng)
-        light = Lighting(ambient=rng.uniform(25, 45), stripes_on=defects.get(i) != "no_stripes", fur=False)
-        stripe_img = expose(hits, surfaces, rig, light, rng, irr)
+        board_img = expose(hits, surfaces, rig, Lighting(**{"ambient": rng.uniform(100, 130), **light,
+                                                             "stripes_on": False}), rng)
+        amb = rng.uniform(25, 45) if stripe_ambient is None else stripe_ambient
+        on = Lighting(**{**light, "ambient": amb, "stripes_on": defects.get(i) != "no_stripes", "fur": False})
+        stripe_img = expose(hits, surfaces, rig, on, rng, irr)
         cv2.imwrite(str(out / "calib" / f"{name}_board.png"), board_img)
         cv2.imwrite(str(out / "calib" / f"{name}_stripes.png"), stripe_img)
         truth["board_poses"].append({"name": name, "R": R.tolist(), "t": t.tolist(), "defect": defects.get(i)})
@@ -127,19 +133,19 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
         np.savez_compressed(out / "truth" / f"{name}_stripes.npz", **st)  # type: ignore[arg-type]
     animal = from_mesh(mesh) if mesh else quadruped(seed=seed)
     for view in scenes:
-        _write_view(out, view, animal, rig, rays_xy, fur, seed, rng, truth)
+        _write_view(out, view, animal, rig, rays_xy, fur, seed, rng, truth, light)
     (out / "truth" / "truth.json").write_text(json.dumps(truth, indent=1))
     return out
 
 
 def _write_view(out: Path, view: str, animal: Animal, rig: Rig, rays_xy: np.ndarray, fur: bool, seed: int,
-                rng: np.random.Generator, truth: dict) -> None:
+                rng: np.random.Generator, truth: dict, light: dict) -> None:
     surfaces, R, t = animal_scene(animal, view, fur, seed)
     hits = trace(surfaces, rig.intrinsics, rays_xy)
     irr, stripe = stripe_irradiance(hits, rig, surfaces)
     ambient = rng.uniform(30, 50)
-    img = expose(hits, surfaces, rig, Lighting(ambient=ambient, fur=fur), rng, irr)
-    amb = expose(hits, surfaces, rig, Lighting(ambient=ambient, stripes_on=False, fur=fur), rng)
+    img = expose(hits, surfaces, rig, Lighting(**{"ambient": ambient, **light, "fur": fur}), rng, irr)
+    amb = expose(hits, surfaces, rig, Lighting(**{"ambient": ambient, **light, "stripes_on": False, "fur": fur}), rng)
     cv2.imwrite(str(out / "scan" / f"{view}.png"), img)
     cv2.imwrite(str(out / "scan" / f"{view}_ambient.png"), amb)
     st = stripe_truth(hits, stripe, rig, surfaces)
