@@ -12,7 +12,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from .board import BoardParams, board_plane, find_corners, object_points
+from .board import BoardParams, abc_to_plane, find_corners, fit_plane_abc, object_points
 from .camera import Intrinsics, rays
 from .capture import Capture
 from .errors import CalibrationError, StripeDetectionError
@@ -294,7 +294,10 @@ def _pose_stripes(pose, corners, extr, errors, reasons, intr, rig, pattern, para
     if pose.name not in extr:
         return PoseReport(pose.name, False, reason=reasons.get(pose.name)), []
     R, t = extr[pose.name]
-    plane = board_plane(R, t)
+    # the paper's board plane: least squares (eq. 2-4) through the corners in camera coordinates; the
+    # corners are coplanar by construction, so it equals the extrinsics' plane to rounding
+    corners_cam = object_points(pattern, rig.square_mm).astype(np.float64) @ R.T + t
+    plane = abc_to_plane(fit_plane_abc(corners_cam))
     base = dict(name=pose.name, used=True, reprojection_error_px=errors[pose.name], board_plane=plane.tolist())
     if pose.stripes is None:
         return PoseReport(**base, reason="no stripe image"), []
