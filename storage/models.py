@@ -199,6 +199,23 @@ class SessionCreate(SessionBase):
     model_config = ConfigDict(extra="forbid")
 
 
+class SessionUpdate(SQLModel):
+    """Corrections to a session's date, operator or notes (its animal and calibration are fixed)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    date: dt.date | None = None
+    operator: str | None = Field(default=None, max_length=120)
+    notes: str | None = Field(default=None, max_length=4000)
+
+    @model_validator(mode="after")
+    def _no_nulls(self) -> SessionUpdate:
+        for name in sorted(self.model_fields_set):
+            if getattr(self, name) is None:
+                raise ValueError(f"{name} cannot be null (leave it out to keep its value)")
+        return self
+
+
 class Scan(SQLModel, table=True):
     """One image of a session for one view, its cloud (npz blob) and its automatic measurements."""
 

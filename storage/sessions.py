@@ -12,7 +12,7 @@ from .blobs import get_bytes, put_blob
 from .calibrations import get_calibration, require_usable
 from .errors import ConflictError, NotFoundError
 from .jobs import enqueue
-from .models import Job, JobKind, JobStatus, MeasuringSession, Scan, SessionCreate
+from .models import Job, JobKind, JobStatus, MeasuringSession, Scan, SessionCreate, SessionUpdate
 
 CLOUD_KEYS = ("points", "stripe", "uv", "scene_points", "scene_stripe")
 
@@ -33,6 +33,16 @@ def get_session(session: Session, session_id: int) -> MeasuringSession:
     record = session.get(MeasuringSession, session_id)
     if record is None:
         raise NotFoundError("session", session_id)
+    return record
+
+
+def update_session(session: Session, session_id: int, data: SessionUpdate) -> MeasuringSession:
+    """Apply the fields present in ``data``."""
+    record = get_session(session, session_id)
+    for key, value in data.model_dump(exclude_unset=True).items():
+        setattr(record, key, value)
+    session.add(record)
+    session.flush()
     return record
 
 

@@ -188,3 +188,12 @@ def test_an_ambient_image_is_kept_with_the_scan_and_must_match_its_size(client):
         from storage.sessions import scan_ambient
 
         assert scan_ambient(db, r.json()["id"]) == dark
+
+
+def test_a_session_date_operator_and_notes_can_be_corrected(client):
+    s = session_for(client, finished_calibration(engine_of(client)))
+    r = client.patch(f"/api/sessions/{s['id']}", json={"date": "2026-05-05", "notes": "calm animal"})
+    assert r.status_code == 200, r.text
+    assert (r.json()["date"], r.json()["operator"], r.json()["notes"]) == ("2026-05-05", "Ann", "calm animal")
+    for body in ({"animal_id": 2}, {"operator": None}, {"date": "soon"}):
+        assert client.patch(f"/api/sessions/{s['id']}", json=body).status_code == 422

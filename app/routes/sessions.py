@@ -13,7 +13,7 @@ from app.schemas import Accepted, SessionDetail, SessionOut
 from app.uploads import read_upload
 from storage import animals, measurements, sessions
 from storage.calibrations import require_usable
-from storage.models import MeasurementPublic, SessionCreate, View
+from storage.models import MeasurementPublic, SessionCreate, SessionUpdate, View
 
 router = APIRouter(prefix="/sessions", tags=["sessions"])
 
@@ -39,6 +39,12 @@ def read_session(session_id: int, db: DbDep):
         scans=[scan_out(db, s) for s in sessions.scans_of(db, session_id)],
         measurements=[MeasurementPublic.model_validate(m) for m in measurements.current_measurements(db, [session_id])],
     )
+
+
+@router.patch("/{session_id}", response_model=SessionOut)
+def update_session(session_id: int, data: SessionUpdate, db: DbDep):
+    """Correct the date, operator or notes of a session."""
+    return sessions.update_session(db, session_id, data)
 
 
 @router.post("/{session_id}/scans", status_code=202, response_model=Accepted)
