@@ -1,0 +1,52 @@
+"""Line-plane triangulation (section 2.3.3, eq. 5-6 after undistortion): the viewing ray of a stripe
+centre meets the light plane of its stripe. Rays come from a per-pixel table built once per camera, so a
+frame's 100 000 centres cost microseconds, not an iterative undistortion each."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+
+from .camera import Intrinsics, ray_grid
+
+
+@lru_cache(maxsize=4)
+def _ray_table(key: tuple) -> np.ndarray:
+    K = np.array(key[0]).reshape(3, 3)
+    dist = np.array(key[1])
+    intr = Intrinsics(K, dist, (key[2], key[3]))
+    return ray_grid(intr).astype(np.float32)
+
+
+def ray_table(intr: Intrinsics) -> np.ndarray:
+    """(H, W, 2) float32 normalised (x, y) of every pixel centre, cached per camera."""
+    key = (tuple(np.round(intr.camera_matrix.ravel(), 9)), tuple(np.round(intr.dist_coeffs.ravel(), 12)),
+           int(intr.image_size[0]), int(intr.image_size[1]))
+    return _ray_table(key)
+
+
+def rays_at(u: np.ndarray, v: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """Rays (M, 3) with z = 1 through sub-pixel columns ``u`` (M,) of integer rows ``v`` (M,), by linear
+    interpolation along the row of the ray table (rows are exact)."""
+    w = table.shape[1]
+    u0 = np.clip(np.floor(u).astype(np.int64), 0, w - 2)
+    f = (u - u0)[:, None]
+    xy = table[v, u0] * (1 - f) + table[v, u0 + 1] * f
+    return np.column_stack([xy, np.ones(len(u))])
+
+
+def intersect(rays: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """Points (M, 3) mm where rays (M, 3) meet planes (M, 4) [n, d] (n.X = d); NaN when parallel."""
+    denom = np.einsum("ij,ij->i", rays, planes[:, :3])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = planes[:, 3] / denom
+    s[np.abs(denom) < 1e-9] = np.nan
+    return rays * s[:, None]
+
+
+def depth_for_labels(rays: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """Depth z (M, K) mm of each ray (M, 3) on every plane (K, 4); NaN/negative where behind the camera."""
+    denom = rays @ planes[:, :3].T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return planes[None, :, 3] / denom
