@@ -144,8 +144,8 @@ def check_image(image: np.ndarray, expected: tuple[int, int] | None, name: str =
         raise ImageError(f"{name}: image is {w}x{h} but the calibration is for {expected[0]}x{expected[1]}")
     g = to_gray8(image)
     sample = g[::4, ::4]
-    if int(sample.max()) - int(sample.min()) < 10:
-        raise StripeDetectionError(f"{name}: the image is blank (no contrast): no stripes to measure")
     if float((sample >= 250).mean()) > 0.5:
         raise StripeDetectionError(f"{name}: more than half of the image is saturated: reduce exposure or "
                                    "projector brightness")
+    if int(sample.max()) - int(sample.min()) < 10:
+        raise StripeDetectionError(f"{name}: the image is blank (no contrast): no stripes to measure")

@@ -151,8 +151,20 @@ def _segment_vote(seg: np.ndarray, labels: np.ndarray, min_share: float = 0.8) -
     return out
 
 
+@dataclass(frozen=True, eq=False)
+class Labels:
+    """Stripe index per centre and the background found on the way.
+
+    stripe     : (M,) int64 light-plane index, -1 where none can be trusted
+    background : (P, 4) planes [n, d] of the floor / wall (mm), or None
+    """
+
+    stripe: np.ndarray
+    background: np.ndarray | None
+
+
 def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple[int, int],
-                  params: MatchingParams = MatchingParams(), projector_right: bool = True) -> np.ndarray:
+                  params: MatchingParams = MatchingParams()) -> Labels:
     """Stripe index (M,) for each centre, -1 where none can be trusted.
 
     rays : (M, 3) viewing rays of the centres (z = 1); planes : (N, 4) light planes, left to right
@@ -160,7 +172,7 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     n = len(planes)
     m = len(c)
     if m == 0:
-        return np.zeros(0, np.int64)
+        return Labels(np.zeros(0, np.int64), None)
     link = params.link_px * max(shape[1] / 3072.0, 0.5)
     seg = link_segments(c, link)
     long_seg = np.bincount(seg)[seg] >= params.min_segment_rows
@@ -187,7 +199,7 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     zmin, zmax = params.depth_range_mm
     z = np.where(ok, z_all[np.arange(m), np.clip(labels, 0, n - 1)], np.nan)
     labels[ok & ~((z > zmin) & (z < zmax))] = -1
-    return _enforce_row_order(c, labels)
+    return Labels(_enforce_row_order(c, labels), bg_planes)
 
 
 def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, zrange

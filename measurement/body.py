@@ -1,0 +1,127 @@
+"""Isolating the animal and its automatic measurements (section 2.3.3): per-stripe extents give the body
+height (or width seen from above), the first and last stripe groups give the body length, and an
+oriented box of the cloud is a cross-check. Every measurement keeps the points it came from."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+
+@dataclass(frozen=True)
+class BodyParams:
+    """min_group: stripe groups with fewer animal points are ignored; trim: robust extreme quantile;
+    background_mm: points this close to a floor/wall plane are background; cluster_mm: neighbour radius."""
+
+    min_group: int = 10
+    trim: float = 0.01
+    background_mm: float = 12.0
+    cluster_mm: float = 25.0
+
+
+def isolate(points: np.ndarray, background: np.ndarray | None, params: BodyParams = BodyParams()) -> np.ndarray:
+    """(N,) bool mask of the animal: off the background planes, largest connected cluster."""
+    keep = np.isfinite(points).all(axis=1)
+    if background is not None and len(background):
+        d = np.abs(points @ background[:, :3].T - background[:, 3]).min(axis=1)
+        keep &= d > params.background_mm
+    idx = np.nonzero(keep)[0]
+    if len(idx) < params.min_group:
+        return np.zeros(len(points), bool)
+    pairs = cKDTree(points[idx]).query_pairs(params.cluster_mm, output_type="ndarray")
+    from scipy.sparse import coo_matrix
+
+    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(idx), len(idx)))
+    _, comp = connected_components(g, directed=False)
+    biggest = np.argmax(np.bincount(comp))
+    out = np.zeros(len(points), bool)
+    out[idx[comp == biggest]] = True
+    return out
+
+
+def _extent(points: np.ndarray, trim: float) -> tuple[float, np.ndarray]:
+    """Robust extent of a group along its principal direction and its two extreme points (2, 3).
+    Specks beyond Tukey's fences (1.5 interquartile ranges) are dropped before the extremes are taken."""
+    keep = np.ones(len(points), bool)
+    for _ in range(2):
+        c = np.median(points[keep], axis=0)
+        _, _, vt = np.linalg.svd(points[keep] - c, full_matrices=False)
+        t = (points - c) @ vt[0]
+        q1, q3 = np.quantile(t[keep], [0.25, 0.75])
+        keep = (t >= q1 - 1.5 * (q3 - q1)) & (t <= q3 + 1.5 * (q3 - q1))
+    lo, hi = np.quantile(t[keep], [trim, 1 - trim])
+    ends = np.array([c + lo * vt[0], c + hi * vt[0]])
+    return float(hi - lo), ends
+
+
+def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
+            params: BodyParams = BodyParams()) -> dict:
+    """Automatic measurements of an isolated animal cloud.
+
+    points (N, 3) mm, stripe (N,) index, rows (N,) image row of each point.
+    """
+    out: dict = {"view": view, "point_count": int(len(points))}
+    ks, counts = np.unique(stripe, return_counts=True)
+    groups = [int(k) for k, n in zip(ks, counts, strict=True) if n >= params.min_group]
+    out["stripes_detected"] = len(groups)
+    out["body_height_mm"] = None
+    out["body_length_mm"] = None
+    if not groups:
+        return out
+    extents = [(*_extent(points[stripe == k], params.trim), k) for k in groups]
+    ext, ends, k_best = max(extents, key=lambda e: e[0])
+    name = "body_width" if view == "top" else "body_height"
+    out["body_height_mm"] = round(ext, 2)
+    out[name] = {"value_mm": round(ext, 2), "stripe": k_best, "points": ends.tolist()}
+    out["body_height_is"] = name
+    length = _length(points, stripe, rows, groups, params.min_group)
+    if length is not None:
+        out["body_length_mm"] = round(length["value_mm"], 2)
+        out["body_length"] = length
+    out["oriented_box_mm"] = _box(points)
+    return out
+
+
+def _length(points, stripe, rows, groups, min_rows) -> dict | None:
+    """Mean distance between the first and last stripe groups over the rows both have; if they share
+    fewer than ``min_rows`` rows, the outermost pair that does."""
+    for shrink in range(len(groups) // 2):
+        for a_i, b_i in ((shrink, len(groups) - 1 - shrink), (shrink + 1, len(groups) - 1 - shrink),
+                         (shrink, len(groups) - 2 - shrink)):
+            if a_i >= b_i:
+                continue
+            a, b = groups[a_i], groups[b_i]
+            ma, mb = stripe == a, stripe == b
+            shared = np.intersect1d(rows[ma], rows[mb])
+            if len(shared) < min_rows:
+                continue
+            pa = _per_row(points[ma], rows[ma], shared)
+            pb = _per_row(points[mb], rows[mb], shared)
+            d = np.linalg.norm(pa - pb, axis=1)
+            i = int(np.argmin(np.abs(d - np.median(d))))
+            note = None if (a_i, b_i) == (0, len(groups) - 1) else (
+                f"the outermost groups (stripes {groups[0]} and {groups[-1]}) share fewer than {min_rows} rows; "
+                f"stripes {a} and {b} were used")
+            return {"value_mm": float(np.mean(d)), "stripes": [a, b], "rows": int(len(shared)),
+                    "points": [pa[i].tolist(), pb[i].tolist()], "note": note}
+    return None
+
+
+def _per_row(points: np.ndarray, rows: np.ndarray, shared: np.ndarray) -> np.ndarray:
+    order = np.argsort(rows, kind="stable")
+    r, p = rows[order], points[order]
+    first = np.searchsorted(r, shared)
+    return p[first]
+
+
+def _box(points: np.ndarray) -> dict:
+    c = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - c, full_matrices=False)
+    t = (points - c) @ vt.T
+    lo, hi = np.quantile(t, [0.01, 0.99], axis=0)
+    size = hi - lo
+    return {"length_mm": round(float(size[0]), 2), "width_mm": round(float(size[2]), 2),
+            "height_mm": round(float(size[1]), 2), "axes": vt.tolist(), "centre": c.tolist()}

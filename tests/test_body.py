@@ -1,0 +1,52 @@
+import numpy as np
+
+from measurement.body import isolate, measure
+
+
+def _barrel(length=400.0, radius=100.0, n_stripes=20, rows=60):
+    """Vertical stripe profiles across a horizontal half-cylinder (the animal's flank seen from the side):
+    stripe k at x = k * length / (n - 1), each a vertical arc of height 2 * radius."""
+    pts, stripe, row = [], [], []
+    for k in range(n_stripes):
+        x = k * length / (n_stripes - 1)
+        ang = np.linspace(-np.pi / 2, np.pi / 2, rows)
+        y, z = radius * np.sin(ang), 1200 - radius * np.cos(ang)
+        pts.append(np.column_stack([np.full(rows, x), y, z]))
+        stripe.append(np.full(rows, k))
+        row.append(np.arange(rows))
+    return np.vstack(pts), np.concatenate(stripe), np.concatenate(row)
+
+
+def test_height_is_the_largest_stripe_extent_and_length_the_end_groups_distance():
+    pts, stripe, rows = _barrel()
+    m = measure(pts, stripe, rows, "side")
+    assert abs(m["body_height_mm"] - 200.0) < 200.0 * 0.03  # robust 1 %-99 % quantiles trim the ends
+    assert abs(m["body_length_mm"] - 400.0) < 0.01
+    assert m["stripes_detected"] == 20 and m["body_length"]["stripes"] == [0, 19]
+    assert len(m["body_height"]["points"]) == 2
+
+
+def test_a_stray_speck_does_not_move_the_extremes():
+    pts, stripe, rows = _barrel()
+    clean = measure(pts, stripe, rows, "side")["body_height_mm"]
+    pts = np.vstack([pts, [[200.0, 400.0, 1200.0]]])
+    stripe = np.append(stripe, 10)
+    rows = np.append(rows, 30)
+    assert abs(measure(pts, stripe, rows, "side")["body_height_mm"] - clean) < 3.0
+
+
+def test_top_view_names_the_extent_body_width():
+    pts, stripe, rows = _barrel()
+    m = measure(pts, stripe, rows, "top")
+    assert "body_width" in m and m["body_height_is"] == "body_width"
+
+
+def test_isolation_drops_the_floor_and_stray_clusters():
+    pts, _, _ = _barrel()
+    floor = np.column_stack([np.random.default_rng(0).uniform(-300, 700, (500, 2)), np.zeros(500)])[:, [0, 2, 1]]
+    floor[:, 1] = -150.0
+    floor[:, 2] += 1200
+    stray = np.array([[2000.0, 0, 1500], [2005.0, 0, 1500]])
+    allp = np.vstack([pts, floor, stray])
+    keep = isolate(allp, np.array([[0.0, 1.0, 0.0, -150.0]]))
+    assert keep[: len(pts)].all() and not keep[len(pts):].any()

@@ -1,0 +1,79 @@
+"""The scan pipeline on the simulator. The animal's stripe labels are still work in progress (issue 3);
+what is tested here holds today: input checks, and the background (floor, wall) labelled and placed
+exactly."""
+
+import numpy as np
+import pytest
+
+from measurement.calibration import Calibration, load_calibration
+from measurement.detection import detect_centres
+from measurement.errors import ImageError, ScanError, StripeDetectionError
+from measurement.images import read_image
+from measurement.matching import denoise, label_centres
+from measurement.pipeline import scan
+from measurement.triangulation import intersect, ray_table, rays_at
+
+
+@pytest.fixture(scope="module")
+def truth_cal(small_capture) -> Calibration:
+    return load_calibration(small_capture / "truth" / "truth.json")
+
+
+def _truth_labels(small_capture, c):
+    t = np.load(small_capture / "truth" / "side_stripes.npz")
+    order = np.lexsort((t["uv"][:, 0], np.rint(t["uv"][:, 1])))
+    key = np.rint(t["uv"][order, 1]) * 1e5 + t["uv"][order, 0]
+    q = c.v.astype(np.float64) * 1e5 + c.u
+    idx = np.clip(np.searchsorted(key, q), 1, len(key) - 1)
+    cand = np.stack([idx - 1, idx], 1)
+    d = np.abs(key[cand] - q[:, None])
+    best = cand[np.arange(len(q)), d.argmin(1)]
+    near = d.min(1) < 1.5
+    return np.where(near, t["stripe"][order][best], -1), np.where(near, t["kind"][order][best], 0)
+
+
+def test_background_stripes_are_labelled_and_placed_exactly(small_capture, truth_cal):
+    img = read_image(small_capture / "scan" / "side.png")
+    c = detect_centres(img)
+    c = c.take(denoise(c, img.shape))
+    rays = rays_at(c.u, c.v, ray_table(truth_cal.intrinsics))
+    labels = label_centres(c, rays, truth_cal.planes, img.shape)
+    truth, kind = _truth_labels(small_capture, c)
+    for code in (2, 3):  # floor, wall
+        m = (kind == code) & (labels.stripe >= 0)
+        assert m.sum() > 0.6 * (kind == code).sum()
+        assert np.mean(labels.stripe[m] == truth[m]) > 0.998
+    assert labels.background is not None and len(labels.background) == 2
+    wall = (kind == 3) & (labels.stripe >= 0)
+    pts = intersect(rays[wall], truth_cal.planes[labels.stripe[wall]])
+    resid = np.abs(pts @ labels.background[:, :3].T - labels.background[:, 3]).min(axis=1)
+    assert np.median(resid) < 1.5
+
+
+def test_scan_returns_a_contract_shaped_result(small_capture, truth_cal):
+    r = scan(read_image(small_capture / "scan" / "side.png"), truth_cal, "side")
+    m = r.measurements
+    for key in ("point_count", "body_length_mm", "body_height_mm", "stripes_detected", "view"):
+        assert key in m
+    assert m["point_count"] == len(r.points) == len(r.stripe) == len(r.uv)
+    assert len(r.scene_points) > 1000 and m["view"] == "side"
+
+
+def test_blank_saturated_and_wrong_size_images_are_refused(truth_cal):
+    w, h = truth_cal.intrinsics.image_size
+    with pytest.raises(StripeDetectionError, match="blank"):
+        scan(np.full((h, w), 17, np.uint8), truth_cal)
+    with pytest.raises(StripeDetectionError, match="saturated"):
+        scan(np.full((h, w), 255, np.uint8), truth_cal)
+    with pytest.raises(ImageError, match="calibration is for"):
+        scan(np.zeros((100, 120), np.uint8), truth_cal)
+
+
+def test_camera_only_or_other_stripe_count_calibrations_are_refused(small_capture, truth_cal):
+    img = read_image(small_capture / "scan" / "side.png")
+    with pytest.raises(ScanError, match="camera-only"):
+        scan(img, Calibration(truth_cal.intrinsics, None))
+    with pytest.raises(ScanError, match="light planes"):
+        scan(img, Calibration(truth_cal.intrinsics, truth_cal.planes[::3]))
+    with pytest.raises(ScanError, match="view"):
+        scan(img, truth_cal, "under")
