@@ -35,6 +35,7 @@ from .detection import Centres
 from .triangulation import depth_for_labels, intersect
 
 _log = logging.getLogger(__name__)
+_TRACE: list | None = None  # tests and benchmarks may collect the foreground clusters here
 
 
 @dataclass(frozen=True)
@@ -104,6 +105,59 @@ def link_segments(c: Centres, link_px: float) -> np.ndarray:
     return seg
 
 
+def split_at_changes(c: Centres, seg: np.ndarray, window: int = 8, ratio: float = 1.8,
+                     slope_change: float = 0.35) -> np.ndarray:
+    """Cut segments where a stripe passes onto another surface without a visible gap: the stripe's
+    brightness above background jumps (another albedo, distance, angle) or its direction kinks. Label-
+    free, so a stripe that crossed the animal's outline in the image is separated before any index is
+    given. Returns new segment ids (M,)."""
+    out = seg.copy()
+    nxt = seg.max() + 1
+    order = np.lexsort((c.v, seg))
+    s_sorted = seg[order]
+    starts = np.r_[0, np.nonzero(s_sorted[1:] != s_sorted[:-1])[0] + 1, len(order)]
+    logc = np.log(np.maximum(c.contrast.astype(np.float64), 1.0))
+    for a, b in zip(starts[:-1], starts[1:], strict=True):
+        if b - a < 2 * window + 2:
+            continue
+        idx = order[a:b]
+        lc = logc[idx]
+        u, v = c.u[idx], c.v[idx].astype(np.float64)
+        cs = np.r_[0.0, np.cumsum(lc)]
+        i = np.arange(window, len(idx) - window)
+        before = (cs[i] - cs[i - window]) / window
+        after = (cs[i + window] - cs[i]) / window
+        jump = np.abs(after - before)
+        # slopes du/dv on each side by least squares over the window
+        sb = _slopes(u, v, i - window, i)
+        sa = _slopes(u, v, i, i + window)
+        kink = np.abs(sa - sb)
+        score = np.maximum(jump / np.log(ratio), kink / slope_change)
+        cuts = []
+        j = 0
+        while j < len(i):
+            if score[j] >= 1.0:
+                k = j + int(np.argmax(score[j:j + window]))
+                cuts.append(i[k])
+                j = k + window
+            else:
+                j += 1
+        for cpos in cuts:
+            out[idx[cpos:]] = nxt
+            nxt += 1
+    return out
+
+
+def _slopes(u: np.ndarray, v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    cu, cv = np.r_[0.0, np.cumsum(u)], np.r_[0.0, np.cumsum(v)]
+    cuv, cvv = np.r_[0.0, np.cumsum(u * v)], np.r_[0.0, np.cumsum(v * v)]
+    n = (hi - lo).astype(np.float64)
+    su, sv = cu[hi] - cu[lo], cv[hi] - cv[lo]
+    suv, svv = cuv[hi] - cuv[lo], cvv[hi] - cvv[lo]
+    den = n * svv - sv * sv
+    return np.where(den > 1e-9, (n * suv - su * sv) / np.maximum(den, 1e-9), 0.0)
+
+
 def _row_neighbours(c: Centres) -> tuple[np.ndarray, np.ndarray]:
     """Index of the left and right neighbour of each centre in its row (-1 at the row's ends)."""
     order = np.lexsort((c.u, c.v))
@@ -164,7 +218,7 @@ class Labels:
 
 
 def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple[int, int],
-                  params: MatchingParams = MatchingParams()) -> Labels:
+                  params: MatchingParams = MatchingParams(), intr=None) -> Labels:
     """Stripe index (M,) for each centre, -1 where none can be trusted.
 
     rays : (M, 3) viewing rays of the centres (z = 1); planes : (N, 4) light planes, left to right
@@ -174,7 +228,7 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     if m == 0:
         return Labels(np.zeros(0, np.int64), None)
     link = params.link_px * max(shape[1] / 3072.0, 0.5)
-    seg = link_segments(c, link)
+    seg = split_at_changes(c, link_segments(c, link))
     long_seg = np.bincount(seg)[seg] >= params.min_segment_rows
     left, right = _row_neighbours(c)
     # 1: the background (floor, wall) from complete rows
@@ -190,10 +244,14 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     tol = spacing_mm * params.continuity
     # 3: the background grows over its own surfaces; a segment joins it only if it then lies on them
     _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, 1.7 * spacing_mm, n, bg_planes)
+    # 3b: unlabelled pieces of floor or wall (between the legs, beside the outline) are claimed by the
+    # one label that puts them on a background plane
+    if bg_planes is not None:
+        seg_label.update(_claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n))
     # 4: foreground clusters: relative labels by growing from a seed, offset from the shadow they cast
     z_all = depth_for_labels(rays, planes)
     seg_label.update(_foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all,
-                                 params.depth_range_mm))
+                                 params.depth_range_mm, intr, bg_planes, shape))
     labels = _labels_of(seg, seg_label, long_seg)
     ok = labels >= 0
     zmin, zmax = params.depth_range_mm
@@ -202,8 +260,30 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     return Labels(_enforce_row_order(c, labels), bg_planes)
 
 
-def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, zrange
-                ) -> dict[int, int]:
+def _claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, min_rows: int = 15,
+                      share: float = 0.95, tol_mm: float = 5.0) -> dict[int, int]:
+    """Unlabelled segments that exactly one stripe index puts on a background plane (>= ``share`` of
+    their points within ``tol_mm``); animal stripes are curved and fit no single plane that way."""
+    labelled = np.zeros(seg.max() + 1, bool)
+    labelled[list(seg_label)] = True
+    cand = long_seg & ~labelled[seg]
+    sizes = np.bincount(seg[cand], minlength=seg.max() + 1)
+    out = {}
+    for sid in np.nonzero(sizes >= min_rows)[0]:
+        idx = np.nonzero(seg == sid)[0]
+        r = rays[idx]
+        hits = []
+        for k in range(n):
+            p = intersect(r, planes[np.full(len(idx), k)])
+            if _near_planes(p, bg_planes, tol_mm).mean() >= share:
+                hits.append(k)
+        if len(hits) == 1:
+            out[int(sid)] = hits[0]
+    return out
+
+
+def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, zrange, intr=None,
+                bg_planes=None, shape=(0, 0)) -> dict[int, int]:
     """Labels for the segments the background did not claim, cluster by cluster."""
     out: dict[int, int] = {}
     labelled = np.zeros(seg.max() + 1, bool)
@@ -225,17 +305,19 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         rel = np.full(seg.max() + 1, 0, np.int64)
         for sid, k in trial.items():
             rel[sid] = k - mid
-        off = _shadow_offset(c, rays, planes, seg, cl, rel[seg], idx, n)
+        off = _occlusion_offset(rays, planes, cl, rel[seg], idx, n, _projector_right(planes))
+        if _TRACE is not None:
+            _TRACE.append((idx, rel[seg[idx]], off))
         if off is None:
             continue
         lab = rel[seg[idx]] + off
-        if lab.min() < 0 or lab.max() >= n:
-            continue
-        z = z_all[idx, lab]
-        if np.mean((z > zrange[0]) & (z < zrange[1])) < 0.9:
+        inside = (lab >= 0) & (lab < n)
+        z = z_all[idx[inside], lab[inside]]
+        if inside.mean() < 0.8 or np.mean((z > zrange[0]) & (z < zrange[1])) < 0.9:
             continue
         for sid in members:
-            out[int(sid)] = int(rel[sid] + off)
+            if 0 <= rel[sid] + off < n:
+                out[int(sid)] = int(rel[sid] + off)
     return out
 
 
@@ -269,7 +351,8 @@ def _split_foreground(c, seg, labels, on_bg, link, min_rows):
         gap = np.min(np.abs(c.v[idx][:, None].astype(np.int64) - fv[None, :].astype(np.int64)), axis=1)
         fg[idx[gap <= 15]] = True
     fg_idx = np.nonzero(fg)[0]
-    fseg = link_segments(c.take(fg), link) if len(fg_idx) else np.zeros(0, np.int64)
+    sub = c.take(fg)
+    fseg = split_at_changes(sub, link_segments(sub, link)) if len(fg_idx) else np.zeros(0, np.int64)
     new = seg.copy()
     new[fg_idx] = fseg + seg.max() + 1
     long_seg = np.zeros(m, bool)
@@ -400,6 +483,120 @@ def projector_centre(planes: np.ndarray) -> np.ndarray:
 
     p0, a = pencil_axis(planes)
     return p0 - a * (p0[1] / a[1]) if abs(a[1]) > 1e-6 else p0
+
+
+def _projector_right(planes: np.ndarray) -> bool:
+    """Whether the projector sits right of the camera (positive x), from the planes' shared axis."""
+    return bool(projector_centre(planes)[0] > 0)
+
+
+def _projector_elevation(points: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """Elevation of each point (M, 3) as seen from the projector along its stripe: tan of the angle
+    between the ray and the plane perpendicular to the shared axis (the projector's row coordinate)."""
+    from .planes import pencil_axis
+
+    centre = projector_centre(planes)
+    _, a = pencil_axis(planes)
+    q = points - centre
+    along = q @ a
+    across = np.linalg.norm(q - along[:, None] * a, axis=1)
+    return along / np.maximum(across, 1e-9)
+
+
+def _occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, bins: float = 0.002,
+                      free: float = 0.01) -> int | None:
+    """Absolute offset of a cluster with relative labels ``r[idx]``, from the projector's point of view.
+
+    A background point lit by stripe k at projector elevation e proves that nothing stood in front of it
+    on that projector ray: the object must not occupy cell (k, e). Cells well inside a lit run (lit two
+    bins either side too) count, so the shadow's own edges do not. Offsets that slide the object onto lit
+    background conflict; those sliding it toward background the camera cannot see (behind the object)
+    do not, so the right offset is the conflict-free one nearest the conflicts: the lowest with the
+    projector right of the camera, the highest with it on the left.
+    """
+    bg = np.nonzero(cl >= 0)[0]
+    if len(bg) < 100:
+        return None
+    pb = intersect(rays[bg], planes[cl[bg]])
+    eb = np.floor(_projector_elevation(pb, planes) / bins).astype(np.int64)
+    lit = np.unique(cl[bg] * 1_000_000 + eb)
+    deep = lit[np.isin(lit - 2, lit) & np.isin(lit + 2, lit) & np.isin(lit - 1, lit) & np.isin(lit + 1, lit)]
+    rr = r[idx]
+    sub = idx if len(idx) <= 20000 else idx[:: len(idx) // 20000 + 1]
+    rs = r[sub]
+    conflicts = {}
+    for off in range(-int(rr.max()), n - int(rr.min())):
+        k = rs + off
+        inside = (k >= 0) & (k < n)
+        if inside.mean() < 0.8:
+            continue
+        p = intersect(rays[sub][inside], planes[k[inside]])
+        e = np.floor(_projector_elevation(p, planes) / bins).astype(np.int64)
+        cells = np.unique(k[inside] * 1_000_000 + e)
+        conflicts[off] = float(np.isin(cells, deep).mean())
+    if not conflicts:
+        return None
+    _log.debug("occlusion conflicts %s", sorted(conflicts.items()))
+    ok = sorted(o for o, v in conflicts.items() if v <= free)
+    if not ok:
+        return None
+    best = ok[0] if projector_right else ok[-1]
+    # the neighbour toward the conflicts must really conflict, or the boundary is not where we think
+    neighbour = best - 1 if projector_right else best + 1
+    if conflicts.get(neighbour, 1.0) < 2 * free:
+        return None
+    return int(best)
+
+
+def _shadow_cells(c: Centres, cl: np.ndarray, bg: np.ndarray, obj: np.ndarray, planes: np.ndarray, intr,
+                  bg_planes: np.ndarray, shape: tuple[int, int], bins: float, step_mm: float = 4.0) -> np.ndarray:
+    """Projector cells where the background should show a stripe, the camera sees the background, and no
+    stripe was detected: the object's shadow. Returns cell keys k * 1e6 + elevation bin."""
+    from .camera import project
+
+    h, w = shape
+    # where the object is in the image (dilated), to leave out background the camera cannot see
+    scale = 8
+    mask = np.zeros((h // scale + 1, w // scale + 1), np.uint8)
+    mask[c.v[obj] // scale, np.clip(np.rint(c.u[obj]).astype(np.int64) // scale, 0, w // scale)] = 1
+    mask = cv2.dilate(mask, np.ones((7, 7), np.uint8))
+    mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((15, 15), np.uint8))
+    # detected background stripes by (label, row) for the lit test
+    seen = set(zip(cl[bg].tolist(), c.v[bg].tolist(), strict=True))
+    cells = []
+    centre = projector_centre(planes)
+    for k in np.unique(cl[bg]):
+        rows_k = c.v[bg][cl[bg] == k]
+        for plane in bg_planes:
+            d = np.cross(planes[k, :3], plane[:3])
+            if np.linalg.norm(d) < 1e-6:
+                continue
+            d /= np.linalg.norm(d)
+            A = np.vstack([planes[k, :3], plane[:3], d])
+            p0 = np.linalg.solve(A, np.array([planes[k, 3], plane[3], 0.0]))
+            t = np.arange(-3000.0, 3000.0, step_mm)
+            pts = p0 + t[:, None] * d
+            pts = pts[pts[:, 2] > 100]
+            # keep the part of the line no other background plane hides from the projector
+            q = pts - centre
+            others = [o for o in bg_planes if o is not plane]
+            for o in others:
+                s_hit = (o[3] - centre @ o[:3]) / (q @ o[:3])
+                pts = pts[~((s_hit > 0) & (s_hit < 0.999))]
+                q = pts - centre
+            if len(pts) == 0:
+                continue
+            uv = project(pts, intr)
+            ui, vi = np.rint(uv[:, 0]).astype(np.int64), np.rint(uv[:, 1]).astype(np.int64)
+            ok = (ui >= 0) & (ui < w) & (vi >= 0) & (vi < h)
+            ok &= (vi >= rows_k.min()) & (vi <= rows_k.max())  # within the stripe's observed extent
+            ok[ok] &= mask[vi[ok] // scale, ui[ok] // scale] == 0
+            dark = np.array([ok_ and not any((int(k), int(v + dv)) in seen for dv in (-1, 0, 1))
+                             for ok_, v in zip(ok, vi, strict=True)])
+            if dark.any():
+                e = np.floor(_projector_elevation(pts[dark], planes) / bins).astype(np.int64)
+                cells.append(int(k) * 1_000_000 + e)
+    return np.unique(np.concatenate(cells)) if cells else np.zeros(0, np.int64)
 
 
 def _segment_ends(c: Centres, seg: np.ndarray, idx: np.ndarray) -> np.ndarray:

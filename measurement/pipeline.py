@@ -69,7 +69,8 @@ def scan(image: np.ndarray, calibration: Calibration, view: str = "side", ambien
         centres = centres.take(denoise(centres, image.shape[:2]))
     t["denoise"] = time.perf_counter()
     rays = rays_at(centres.u, centres.v, ray_table(calibration.intrinsics))
-    labels = label_centres(centres, rays, calibration.planes, image.shape[:2], params.matching)
+    labels = label_centres(centres, rays, calibration.planes, image.shape[:2], params.matching,
+                           calibration.intrinsics)
     t["match"] = time.perf_counter()
     ok = labels.stripe >= 0
     if ok.sum() < 50:
