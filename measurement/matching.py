@@ -537,13 +537,26 @@ def _occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True,
     if not conflicts:
         return None
     _log.debug("occlusion conflicts %s", sorted(conflicts.items()))
-    ok = sorted(o for o, v in conflicts.items() if v <= free)
-    if not ok:
+    offs = sorted(conflicts)
+    vals = np.array([conflicts[o] for o in offs])
+    if not projector_right:  # mirror, so the conflicts always rise toward lower offsets
+        offs, vals = offs[::-1], vals[::-1]
+    if len(vals) < 5:
         return None
-    best = ok[0] if projector_right else ok[-1]
-    # the neighbour toward the conflicts must really conflict, or the boundary is not where we think
-    neighbour = best - 1 if projector_right else best + 1
-    if conflicts.get(neighbour, 1.0) < 2 * free:
+    roll = np.array([np.median(vals[i:i + 4]) for i in range(len(vals) - 3)])
+    plateau = float(roll.min())
+    limit = max(2 * plateau, free)
+    j = int(np.argmin(roll))
+    i = j + int(np.argmin(vals[j:j + 4]))
+    while i > 0 and vals[i - 1] <= limit:  # walk toward the conflicts while still conflict-free
+        i -= 1
+    if i == 0 or vals[i - 1] < 2 * max(plateau, 0.005):
+        return None
+    best = offs[i]
+    # one conflict-free stretch only: a second one (the object could sit elsewhere too) is ambiguous
+    low = vals <= limit
+    runs = np.flatnonzero(np.diff(np.r_[0, low.astype(np.int8), 0]) == 1)
+    if len(runs) > 1:
         return None
     return int(best)
 
@@ -559,8 +572,8 @@ def _shadow_cells(c: Centres, cl: np.ndarray, bg: np.ndarray, obj: np.ndarray, p
     scale = 8
     mask = np.zeros((h // scale + 1, w // scale + 1), np.uint8)
     mask[c.v[obj] // scale, np.clip(np.rint(c.u[obj]).astype(np.int64) // scale, 0, w // scale)] = 1
-    mask = cv2.dilate(mask, np.ones((7, 7), np.uint8))
-    mask = cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((15, 15), np.uint8))
+    mask = np.asarray(cv2.dilate(mask, np.ones((7, 7), np.uint8)), np.uint8)
+    mask = np.asarray(cv2.morphologyEx(mask, cv2.MORPH_CLOSE, np.ones((15, 15), np.uint8)), np.uint8)
     # detected background stripes by (label, row) for the lit test
     seen = set(zip(cl[bg].tolist(), c.v[bg].tolist(), strict=True))
     cells = []
