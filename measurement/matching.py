@@ -291,15 +291,18 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     remaining = long_seg & ~labelled[seg]
     cl = _labels_of(seg, seg_label, long_seg)
     mid = n // 2
+    biggest = 0
     while remaining.sum() >= 50:
         sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)
         seed = int(np.argmax(sizes))
         trial = {seed: mid}
         _grow_all(c, rays, planes, seg, trial, remaining, left, right, tol, n, None, depth_only=True)
+        _refine(c, rays, planes, seg, trial, remaining & np.isin(seg, list(trial)), left, right, tol, n)
         members = np.array(sorted(trial))
         in_cluster = np.isin(seg, members) & remaining
         remaining &= ~in_cluster
-        if in_cluster.sum() < 50:
+        biggest = max(biggest, int(in_cluster.sum()))
+        if in_cluster.sum() < max(50, 0.1 * biggest):  # small pieces carry too little shadow evidence
             continue
         idx = np.nonzero(in_cluster)[0]
         rel = np.full(seg.max() + 1, 0, np.int64)
@@ -433,8 +436,10 @@ def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
     return float(np.median(np.linalg.norm(a - b, axis=1)))
 
 
-def _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, depth_only=False) -> dict[int, int]:
-    """Labels for unlabelled segments that continue a labelled neighbour's surface (one round)."""
+def _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, depth_only=False,
+          relabel=False, min_share=0.6) -> dict[int, int]:
+    """Labels for unlabelled segments that continue a labelled neighbour's surface (one round). With
+    ``relabel`` the labelled segments in ``long_seg`` are re-voted by their neighbours instead."""
     lab = np.full(seg.max() + 1, -1, np.int64)
     for s, k in seg_label.items():
         lab[s] = k
@@ -442,8 +447,9 @@ def _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, dep
     votes: dict[int, dict[int, int]] = {}
     support: dict[int, int] = {}
     for nb, sign in ((left, 1), (right, -1)):
-        idx = np.nonzero((cl < 0) & long_seg & (nb >= 0))[0]
-        idx = idx[cl[nb[idx]] >= 0]
+        target = (cl >= 0) if relabel else (cl < 0)
+        idx = np.nonzero(target & long_seg & (nb >= 0))[0]
+        idx = idx[(cl[nb[idx]] >= 0) & (seg[nb[idx]] != seg[idx])]
         if len(idx) == 0:
             continue
         kn = cl[nb[idx]]
@@ -470,9 +476,21 @@ def _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, dep
     out = {}
     for s, vs in votes.items():
         k, cnt = max(vs.items(), key=lambda kv: kv[1])
-        if cnt >= 3 and cnt >= 0.6 * support[s]:
+        if cnt >= 3 and cnt >= min_share * support[s]:
             out[s] = k
     return out
+
+
+def _refine(c, rays, planes, seg, seg_label, mask, left, right, tol_mm, n, rounds: int = 3) -> None:
+    """Re-vote each labelled segment in ``mask`` by its neighbours; a clear majority for another label
+    (a growth step that took the wrong gap) replaces it. Updates ``seg_label`` in place."""
+    for _ in range(rounds):
+        votes = _grow(c, rays, planes, seg, seg_label, mask, left, right, tol_mm, n, depth_only=True,
+                      relabel=True, min_share=0.7)
+        changed = {s: k for s, k in votes.items() if seg_label.get(s) != k}
+        if not changed:
+            break
+        seg_label.update(changed)
 
 
 def projector_centre(planes: np.ndarray) -> np.ndarray:
