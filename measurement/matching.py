@@ -215,6 +215,40 @@ class Labels:
 
     stripe: np.ndarray
     background: np.ndarray | None
+    segment: np.ndarray | None = None
+
+
+def smooth_along_segments(c: Centres, segment: np.ndarray, labels: np.ndarray, half: int = 2,
+                          outlier_px: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Average each centre's column with its neighbours along its stripe segment (+-``half`` rows; the
+    surface is smooth over a couple of millimetres along a stripe, fur noise is not) and flag centres
+    more than ``outlier_px`` off the median of their neighbourhood (specks of scattered light).
+
+    returns : smoothed u (M,) float64, keep mask (M,) bool
+    """
+    u = c.u.copy()
+    keep = labels >= 0
+    idx = np.nonzero(keep)[0]
+    if len(idx) == 0:
+        return u, keep
+    order = idx[np.lexsort((c.v[idx], segment[idx]))]
+    s_sorted = segment[order]
+    starts = np.r_[0, np.nonzero(s_sorted[1:] != s_sorted[:-1])[0] + 1, len(order)]
+    win = 2 * half + 1
+    for a, b in zip(starts[:-1], starts[1:], strict=True):
+        if b - a < win:
+            continue
+        ids = order[a:b]
+        x = c.u[ids]
+        pad = np.pad(x, half, mode="edge")
+        stack = np.lib.stride_tricks.sliding_window_view(pad, win)
+        med = np.median(stack, axis=1)
+        bad = np.abs(x - med) > outlier_px
+        good = np.where(bad, med, x)
+        cs = np.r_[0.0, np.cumsum(np.pad(good, half, mode="edge"))]
+        u[ids] = (cs[win:] - cs[:-win]) / win
+        keep[ids[bad]] = False
+    return u, keep
 
 
 def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple[int, int],
@@ -250,14 +284,24 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
         seg_label.update(_claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n))
     # 4: foreground clusters: relative labels by growing from a seed, offset from the shadow they cast
     z_all = depth_for_labels(rays, planes)
-    seg_label.update(_foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all,
-                                 params.depth_range_mm, intr, bg_planes, shape))
+    fg_labels = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all,
+                            params.depth_range_mm, intr, bg_planes, shape)
+    if fg_labels:
+        # pieces of the animal without shadow evidence of their own continue a labelled piece's surface
+        is_bg = np.zeros(seg.max() + 1, bool)
+        is_bg[list(seg_label)] = True
+        fg_mask = long_seg & ~is_bg[seg]
+        if bg_planes is not None:  # leave alone what some index would put on the floor or wall
+            fg_mask &= ~_background_like(rays, planes, seg, fg_mask, bg_planes, set(fg_labels))
+        _grow_all(c, rays, planes, seg, fg_labels, fg_mask, left, right, tol, n, None, depth_only=True,
+                  gaps=(1,), min_share=0.8)
+    seg_label.update(fg_labels)
     labels = _labels_of(seg, seg_label, long_seg)
     ok = labels >= 0
     zmin, zmax = params.depth_range_mm
     z = np.where(ok, z_all[np.arange(m), np.clip(labels, 0, n - 1)], np.nan)
     labels[ok & ~((z > zmin) & (z < zmax))] = -1
-    return Labels(_enforce_row_order(c, labels), bg_planes)
+    return Labels(_enforce_row_order(c, labels), bg_planes, seg)
 
 
 def _claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, min_rows: int = 15,
@@ -367,13 +411,18 @@ def _split_foreground(c, seg, labels, on_bg, link, min_rows):
 
 
 def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, bg_planes=None,
-              depth_only=False) -> np.ndarray:
+              depth_only=False, avoid_planes=None, gaps=(1, 2, 3), min_share=0.6) -> np.ndarray:
     """Grow labels along continuous surfaces until nothing changes; returns per-centre labels.
-    With ``bg_planes`` a segment only joins when its points then lie on those planes."""
+    With ``bg_planes`` a segment only joins when its points then lie on those planes; with
+    ``avoid_planes`` only when they do not."""
     for _ in range(40):
-        new = _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, depth_only)
+        new = _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, depth_only,
+                    min_share=min_share, gaps=gaps)
         if bg_planes is not None and new:
             new = {s: k for s, k in new.items() if _segment_on_planes(rays, planes, seg, s, k, bg_planes)}
+        if avoid_planes is not None and new:
+            new = {s: k for s, k in new.items()
+                   if not _segment_on_planes(rays, planes, seg, s, k, avoid_planes, share=0.5)}
         if not new:
             break
         seg_label.update(new)
@@ -417,6 +466,22 @@ def _near_planes(points: np.ndarray, bg_planes: np.ndarray, tol_mm: float = 8.0)
     return np.nan_to_num(d, nan=np.inf).min(axis=1) < tol_mm
 
 
+def _background_like(rays, planes, seg, mask, bg_planes, exclude: set, share: float = 0.8) -> np.ndarray:
+    """(M,) True for centres of segments (in ``mask``, not in ``exclude``) that some stripe index puts
+    on a background plane for at least ``share`` of their points."""
+    out = np.zeros(len(seg), bool)
+    for sid in np.unique(seg[mask]):
+        if int(sid) in exclude:
+            continue
+        idx = np.nonzero(seg == sid)[0]
+        z = depth_for_labels(rays[idx], planes)  # (m, N)
+        pts = rays[idx][:, None, :] * z[:, :, None]  # (m, N, 3)
+        d = np.abs(pts @ bg_planes[:, :3].T - bg_planes[:, 3]).min(axis=2)  # (m, N)
+        if (np.nan_to_num(d, nan=np.inf) < 8.0).mean(axis=0).max() >= share:
+            out[idx] = True
+    return out
+
+
 def _segment_on_planes(rays, planes, seg, sid, k, bg_planes, share: float = 0.9) -> bool:
     idx = np.nonzero(seg == sid)[0]
     pts = intersect(rays[idx], planes[np.full(len(idx), k)])
@@ -437,7 +502,7 @@ def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
 
 
 def _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, depth_only=False,
-          relabel=False, min_share=0.6) -> dict[int, int]:
+          relabel=False, min_share=0.6, gaps=(1, 2, 3)) -> dict[int, int]:
     """Labels for unlabelled segments that continue a labelled neighbour's surface (one round). With
     ``relabel`` the labelled segments in ``long_seg`` are re-voted by their neighbours instead."""
     lab = np.full(seg.max() + 1, -1, np.int64)
@@ -456,7 +521,7 @@ def _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, dep
         pn = intersect(rays[nb[idx]], planes[kn])
         best_k = np.full(len(idx), -1)
         best_d = np.full(len(idx), np.inf)
-        for gap in (1, 2, 3):
+        for gap in gaps:
             k = kn + sign * gap
             okk = (k >= 0) & (k < n)
             p = intersect(rays[idx], planes[np.clip(k, 0, n - 1)])

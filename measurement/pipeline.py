@@ -16,7 +16,7 @@ from .body import BodyParams, isolate, measure
 from .calibration import Calibration
 from .detection import DetectionParams, check_image, detect_centres
 from .errors import ScanError
-from .matching import MatchingParams, denoise, label_centres
+from .matching import MatchingParams, denoise, label_centres, smooth_along_segments
 from .triangulation import intersect, ray_table, rays_at
 
 VIEWS = ("side", "top", "front", "back")
@@ -72,13 +72,15 @@ def scan(image: np.ndarray, calibration: Calibration, view: str = "side", ambien
     labels = label_centres(centres, rays, calibration.planes, image.shape[:2], params.matching,
                            calibration.intrinsics)
     t["match"] = time.perf_counter()
-    ok = labels.stripe >= 0
+    seg_ids = labels.segment if labels.segment is not None else np.arange(len(centres))
+    smooth_u, ok = smooth_along_segments(centres, seg_ids, labels.stripe)
     if ok.sum() < 50:
         n_found = int(np.bincount(np.bincount(centres.v)).argmax()) if len(centres) else 0
         raise ScanError(f"no stripe could be matched to the calibration's {calibration.stripes} light planes "
                         f"(rows show about {n_found} stripes): is this calibration for this rig and stripe count?")
-    pts = intersect(rays[ok], calibration.planes[labels.stripe[ok]])
-    uv = np.column_stack([centres.u[ok], centres.v[ok]])
+    rays_s = rays_at(smooth_u[ok], centres.v[ok], ray_table(calibration.intrinsics))
+    pts = intersect(rays_s, calibration.planes[labels.stripe[ok]])
+    uv = np.column_stack([smooth_u[ok], centres.v[ok]])
     stripe = labels.stripe[ok]
     t["triangulate"] = time.perf_counter()
     animal = isolate(pts, labels.background, params.body)
