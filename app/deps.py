@@ -17,7 +17,11 @@ def get_app_settings(request: Request) -> Settings:
 
 
 def get_db(request: Request) -> Iterator[Session]:
-    """A session committed after the route returns, rolled back if it raises."""
+    """A session committed when the route returns, rolled back if it raises.
+
+    Used with ``scope="function"`` so the commit happens before the response is sent: a client that
+    reads the job id from a 202 can poll it at once, and a failing commit becomes the response.
+    """
     with Session(request.app.state.engine, expire_on_commit=False) as session:
         try:
             yield session
@@ -28,4 +32,4 @@ def get_db(request: Request) -> Iterator[Session]:
 
 
 SettingsDep = Annotated[Settings, Depends(get_app_settings)]
-DbDep = Annotated[Session, Depends(get_db)]
+DbDep = Annotated[Session, Depends(get_db, scope="function")]

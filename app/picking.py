@@ -1,5 +1,9 @@
 """Picked measurements: picks are snapped onto the scan's stripe mesh, then measured.
 
+The mesh is built from every reconstructed point of the scan (the scene), not only from the points the
+pipeline kept as the animal: isolating the animal is a heuristic that can drop a neck or a tail, while
+the technician's pick says where the animal is. Picks in empty space are refused (``snap_max_mm``).
+
 ``distance`` is the straight line between the two snapped picks (a calliper). ``polyline`` follows the
 surface: the picked path is resampled every ``path_step_mm`` and every sample is snapped, so a tail or
 a girth is measured along the skin rather than by chords through the body.
@@ -34,9 +38,10 @@ def surface_of(db: Session, scan_id: int) -> SurfaceMesh:
     cloud = sessions.scan_cloud(db, scan_id)
     if len(cloud["points"]) == 0:
         raise InvalidInputError(f"scan {scan_id} has no points to measure on")
-    points = cloud["points"]
-    uv = cloud.get("uv", points[:, :2])  # without image positions, order stripe points by height
-    stripe = cloud.get("stripe", np.full(len(points), -1))  # without stripe ids: snap to the points
+    prefix = "scene_" if "scene_points" in cloud and len(cloud["scene_points"]) else ""
+    points = cloud[f"{prefix}points"]
+    uv = cloud.get(f"{prefix}uv", points[:, :2])  # without image positions, order stripe points by height
+    stripe = cloud.get(f"{prefix}stripe", np.full(len(points), -1))  # without stripe ids: snap to the points
     surface = stripe_mesh(points, stripe, uv)
     with _lock:
         _cache[key] = surface

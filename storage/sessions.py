@@ -14,7 +14,7 @@ from .errors import ConflictError, NotFoundError
 from .jobs import enqueue
 from .models import Job, JobKind, JobStatus, MeasuringSession, Scan, SessionCreate, SessionUpdate
 
-CLOUD_KEYS = ("points", "stripe", "uv", "scene_points", "scene_stripe")
+CLOUD_KEYS = ("points", "stripe", "uv", "scene_points", "scene_stripe", "scene_uv")
 
 
 def create_session(session: Session, data: SessionCreate) -> MeasuringSession:

@@ -197,3 +197,9 @@ def test_a_session_date_operator_and_notes_can_be_corrected(client):
     assert (r.json()["date"], r.json()["operator"], r.json()["notes"]) == ("2026-05-05", "Ann", "calm animal")
     for body in ({"animal_id": 2}, {"operator": None}, {"date": "soon"}):
         assert client.patch(f"/api/sessions/{s['id']}", json=body).status_code == 422
+
+
+def test_an_accepted_upload_is_committed_before_the_answer_arrives(client):
+    # The session dependency commits inside the request: the job of a 202 is visible at once.
+    accepted = client.post("/api/calibrations", files=[("files", ("calib/pose_01_board.png", png()))], data=RIG)
+    assert client.get(f"/api/jobs/{accepted.json()['job_id']}").status_code == 200

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from urllib.parse import quote
 
-from fastapi import APIRouter, Response
+from fastapi import APIRouter, Query, Response
 
 from app.deps import DbDep
 from app.schemas import ScanOut
@@ -28,14 +28,16 @@ def read_scan(scan_id: int, db: DbDep):
 
 @router.get("/{scan_id}/cloud.ply", response_class=Response,
             responses={200: {"content": {"application/octet-stream": {}}, "description": "binary PLY"}})
-def download_cloud(scan_id: int, db: DbDep) -> Response:
+def download_cloud(scan_id: int, db: DbDep, scene: bool = Query(
+        False, description="every reconstructed point (floor and wall too) instead of the isolated animal")) -> Response:
     """The animal's point cloud, binary little-endian PLY: x, y, z in mm (camera frame) and stripe index."""
-    cloud = sessions.scan_cloud(db, scan_id)
     from measurement.ply import write_ply
 
-    body = write_ply(cloud["points"], cloud.get("stripe"))
-    return Response(body, media_type="application/octet-stream",
-                    headers={"Content-Disposition": attachment(f"scan_{scan_id}.ply")})
+    cloud = sessions.scan_cloud(db, scan_id)
+    prefix = "scene_" if scene and "scene_points" in cloud else ""
+    body = write_ply(cloud[f"{prefix}points"], cloud.get(f"{prefix}stripe"))
+    name = f"scan_{scan_id}_scene.ply" if prefix else f"scan_{scan_id}.ply"
+    return Response(body, media_type="application/octet-stream", headers={"Content-Disposition": attachment(name)})
 
 
 @router.get("/{scan_id}/image", response_class=Response,
