@@ -86,27 +86,31 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
 
 
 def _length(points, stripe, rows, groups, min_rows) -> dict | None:
-    """Mean distance between the first and last stripe groups over the rows both have; if they share
-    fewer than ``min_rows`` rows, the outermost pair that does."""
-    for shrink in range(len(groups) // 2):
-        for a_i, b_i in ((shrink, len(groups) - 1 - shrink), (shrink + 1, len(groups) - 1 - shrink),
-                         (shrink, len(groups) - 2 - shrink)):
-            if a_i >= b_i:
-                continue
-            a, b = groups[a_i], groups[b_i]
-            ma, mb = stripe == a, stripe == b
-            shared = np.intersect1d(rows[ma], rows[mb])
-            if len(shared) < min_rows:
-                continue
-            pa = _per_row(points[ma], rows[ma], shared)
-            pb = _per_row(points[mb], rows[mb], shared)
-            d = np.linalg.norm(pa - pb, axis=1)
-            i = int(np.argmin(np.abs(d - np.median(d))))
-            note = None if (a_i, b_i) == (0, len(groups) - 1) else (
-                f"the outermost groups (stripes {groups[0]} and {groups[-1]}) share fewer than {min_rows} rows; "
-                f"stripes {a} and {b} were used")
-            return {"value_mm": float(np.mean(d)), "stripes": [a, b], "rows": int(len(shared)),
-                    "points": [pa[i].tolist(), pb[i].tolist()], "note": note}
+    """Mean distance between the first and last stripe groups over the image rows both have; if they
+    share fewer than ``min_rows`` rows, the outermost pair that does (largest index span, then most
+    shared rows)."""
+    row_sets = {k: np.unique(rows[stripe == k]) for k in groups}
+    for span in range(len(groups) - 1, 0, -1):
+        best = None
+        for a_i in range(len(groups) - span):
+            a, b = groups[a_i], groups[a_i + span]
+            shared = np.intersect1d(row_sets[a], row_sets[b], assume_unique=True)
+            if len(shared) >= min_rows and (best is None or len(shared) > len(best[2])):
+                best = (a, b, shared)
+        if best is None:
+            continue
+        a, b, shared = best
+        ma, mb = stripe == a, stripe == b
+        pa = _per_row(points[ma], rows[ma], shared)
+        pb = _per_row(points[mb], rows[mb], shared)
+        d = np.linalg.norm(pa - pb, axis=1)
+        i = int(np.argmin(np.abs(d - np.median(d))))
+        outermost = span == len(groups) - 1
+        note = None if outermost else (
+            f"the outermost groups (stripes {groups[0]} and {groups[-1]}) share fewer than {min_rows} rows; "
+            f"stripes {a} and {b} were used")
+        return {"value_mm": float(np.mean(d)), "stripes": [int(a), int(b)], "rows": int(len(shared)),
+                "points": [pa[i].tolist(), pb[i].tolist()], "note": note}
     return None
 
 
