@@ -314,16 +314,21 @@ def _claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, m
     sizes = np.bincount(seg[cand], minlength=seg.max() + 1)
     out = {}
     for sid in np.nonzero(sizes >= min_rows)[0]:
-        idx = np.nonzero(seg == sid)[0]
-        r = rays[idx]
-        hits = []
-        for k in range(n):
-            p = intersect(r, planes[np.full(len(idx), k)])
-            if _near_planes(p, bg_planes, tol_mm).mean() >= share:
-                hits.append(k)
+        frac = _on_plane_fractions(rays[seg == sid], planes, bg_planes, tol_mm)
+        hits = np.nonzero(frac >= share)[0]
         if len(hits) == 1:
-            out[int(sid)] = hits[0]
+            out[int(sid)] = int(hits[0])
     return out
+
+
+def _on_plane_fractions(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray, tol_mm: float
+                        ) -> np.ndarray:
+    """(N,) share of the rays (m, 3) whose point on light plane k lies within ``tol_mm`` of a background
+    plane, for every k at once."""
+    z = depth_for_labels(rays, planes)  # (m, N)
+    pts = rays[:, None, :] * z[:, :, None]  # (m, N, 3)
+    d = np.abs(pts @ bg_planes[:, :3].T - bg_planes[:, 3]).min(axis=2)
+    return (np.nan_to_num(d, nan=np.inf) < tol_mm).mean(axis=0)
 
 
 def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, zrange, intr=None,
@@ -474,10 +479,7 @@ def _background_like(rays, planes, seg, mask, bg_planes, exclude: set, share: fl
         if int(sid) in exclude:
             continue
         idx = np.nonzero(seg == sid)[0]
-        z = depth_for_labels(rays[idx], planes)  # (m, N)
-        pts = rays[idx][:, None, :] * z[:, :, None]  # (m, N, 3)
-        d = np.abs(pts @ bg_planes[:, :3].T - bg_planes[:, 3]).min(axis=2)  # (m, N)
-        if (np.nan_to_num(d, nan=np.inf) < 8.0).mean(axis=0).max() >= share:
+        if _on_plane_fractions(rays[idx], planes, bg_planes, 8.0).max() >= share:
             out[idx] = True
     return out
 
