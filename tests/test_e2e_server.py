@@ -24,6 +24,8 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
+from tests.backend_support import drop_postgres_database, fresh_postgres_database
+
 ROOT = Path(__file__).resolve().parents[1]
 CORE = [("measurement.calibration", "calibrate"), ("measurement.pipeline", "scan"), ("measurement.ply", "write_ply"),
         ("measurement.simulate.capture", "write_capture")]
@@ -45,23 +47,27 @@ def missing_core() -> list[str]:
 
 
 @pytest.fixture(scope="module")
-def capture(tmp_path_factory) -> Path:
+def capture(small_capture) -> Path:
+    """The suite's shared simulated capture (tests/conftest.py): 1024x683, 8 poses, side view, truth/."""
     if missing := missing_core():
         pytest.fail("the end-to-end test needs the measurement core, which lacks " + ", ".join(missing))
-    from measurement.simulate.capture import write_capture
+    rig = json.loads((small_capture / "rig.json").read_text())
+    assert rig["stripes"] == 40 and (small_capture / "scan" / "side_ambient.png").exists()
+    return small_capture
 
-    return write_capture(tmp_path_factory.mktemp("capture"), stripes=40, size=SIZE, seed=5,
-                         scenes=("side",), poses=8)
 
-
-@pytest.fixture(scope="module")
-def server(tmp_path_factory):
-    """Base URL of ``bodyscan serve`` on a free port with its own data folder; stopped afterwards."""
+@pytest.fixture(scope="module", params=["sqlite", "postgresql"])
+def server(request, tmp_path_factory):
+    """Base URL of ``bodyscan serve`` on a free port with its own data folder and database (a SQLite file
+    or a fresh PostgreSQL database); stopped afterwards."""
     data = tmp_path_factory.mktemp("data")
     port = free_port()
     env = {k: v for k, v in os.environ.items() if not k.startswith("BODYSCAN_")}
     env.update(BODYSCAN_DATA_DIR=str(data), BODYSCAN_WORKERS="1", BODYSCAN_LOG_LEVEL="INFO",
                PYTHONPATH=str(ROOT))
+    database = fresh_postgres_database() if request.param == "postgresql" else None
+    if database:
+        env["BODYSCAN_DATABASE_URL"] = database
     log = open(data / "server.log", "wb")  # noqa: SIM115  (closed below)
     proc = subprocess.Popen([sys.executable, "-m", "app.cli", "serve", "--port", str(port)], cwd=data,
                             env=env, stdout=log, stderr=subprocess.STDOUT)
@@ -77,7 +83,9 @@ def server(tmp_path_factory):
             proc.kill()
         log.close()
         print((data / "server.log").read_text()[-4000:])  # noqa: T201  (shown when a test fails)
-    assert (data / "bodyscan.db").exists()
+        if database:
+            drop_postgres_database(database)
+    assert (data / "bodyscan.db").exists() == (database is None)
 
 
 def free_port() -> int:
