@@ -9,7 +9,6 @@ starts and sees the dead process id), and failed after ``max_attempts`` interrup
 from __future__ import annotations
 
 import logging
-import multiprocessing
 import os
 import signal
 import socket
@@ -210,40 +209,3 @@ def _install_stop_signals() -> None:
 
     signal.signal(signal.SIGTERM, _stop)
     signal.signal(signal.SIGINT, _stop)
-
-
-# --- the in-process pool of `bodyscan serve` ---------------------------------------------------------
-
-
-def _pool_main(settings_json: str) -> None:
-    from app.main import configure_logging
-
-    settings = Settings.model_validate_json(settings_json)
-    configure_logging(settings)
-    run_worker(settings)
-
-
-def start_pool(settings: Settings) -> list[multiprocessing.Process]:
-    """Start ``settings.workers`` worker processes (spawned, so they share nothing with the server)."""
-    ctx = multiprocessing.get_context("spawn")
-    procs = []
-    for i in range(settings.workers):
-        proc = ctx.Process(target=_pool_main, args=(settings.model_dump_json(),), name=f"bodyscan-worker-{i + 1}",
-                           daemon=True)
-        proc.start()
-        procs.append(proc)
-    return procs
-
-
-def stop_pool(procs: list[multiprocessing.Process], timeout_s: float = 10.0) -> None:
-    """SIGTERM the workers (a running job goes back to the queue), then kill stragglers."""
-    for proc in procs:
-        if proc.is_alive():
-            proc.terminate()
-    deadline = time.monotonic() + timeout_s
-    for proc in procs:
-        proc.join(max(deadline - time.monotonic(), 0.1))
-        if proc.is_alive():
-            log.warning("worker %s did not stop in time; killing it", proc.name)
-            proc.kill()
-            proc.join(1.0)

@@ -15,7 +15,7 @@ from starlette.responses import JSONResponse, Response
 
 from app import errors
 from app.config import Settings, get_settings, software_version
-from app.jobs import start_pool, stop_pool
+from app.pool import WorkerPool
 from app.routes import api_router
 from storage.db import make_engine, upgrade
 
@@ -39,11 +39,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         upgrade(engine)
         app.state.engine = engine
         log.info("database %s ready", engine.url.render_as_string(hide_password=True))
-        pool = start_pool(settings) if settings.workers else []
+        pool = app.state.pool = WorkerPool(settings).start() if settings.workers else None
         try:
             yield
         finally:
-            stop_pool(pool)
+            if pool is not None:
+                pool.stop()
             engine.dispose()
 
     app = FastAPI(title="bodyscan", version=software_version(), lifespan=lifespan,

@@ -203,3 +203,10 @@ def test_an_accepted_upload_is_committed_before_the_answer_arrives(client):
     # The session dependency commits inside the request: the job of a 202 is visible at once.
     accepted = client.post("/api/calibrations", files=[("files", ("calib/pose_01_board.png", png()))], data=RIG)
     assert client.get(f"/api/jobs/{accepted.json()['job_id']}").status_code == 200
+
+
+def test_health_reports_the_queue(client):
+    queued_calibration(client)
+    body = client.get("/api/health").json()
+    assert body["status"] == "ok" and body["jobs"] == {"queued": 1, "running": 0}
+    assert body["workers"] == {"expected": 0, "alive": 0}  # the test app runs no worker processes

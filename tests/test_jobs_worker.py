@@ -116,3 +116,21 @@ def test_bodyscan_worker_once_runs_a_real_calibration_job(tmp_path):
     assert done.status == JobStatus.succeeded, done.error
     assert record.result["image_size"] == [640, 427] and record.result["reprojection_error_px"] < 0.5
     engine.dispose()
+
+
+def test_the_serve_pool_restarts_a_worker_that_died(tmp_path):
+    from app.pool import WorkerPool
+
+    settings = settings_for(tmp_path, poll_s=0.05).model_copy(update={"workers": 1})
+    migrated_engine(settings.db_url).dispose()
+    pool = WorkerPool(settings, check_s=0.1).start()
+    try:
+        (first,) = pool.pids()
+        os.kill(first, signal.SIGKILL)
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline and (pool.pids() == [first] or pool.alive() != 1):
+            time.sleep(0.05)
+        assert pool.alive() == 1 and pool.pids() != [first]
+    finally:
+        pool.stop()
+    assert pool.alive() == 0
