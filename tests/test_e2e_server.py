@@ -217,6 +217,8 @@ def test_technician_workflow_over_http(server, capture):
         exact = np.load(capture / "truth" / "side_stripes.npz")["points"]
         gap = cKDTree(exact).query(cloud)[0]
         assert np.median(gap) < 2.0 and np.percentile(gap, 90) < 6.0
+        scene = read_ply(api.get(f"/api/scans/{scan_id}/cloud.ply", params={"scene": True}).content)
+        assert len(scene) > len(ply)  # floor and wall as well
 
         # picked: a distance and a surface-following polyline along the flank (known exactly on the
         # simulated torso), the neck width between the simulator's landmarks; manual: tape body length
