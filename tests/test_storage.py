@@ -122,3 +122,20 @@ def test_measurement_changes_are_appended_and_the_history_kept(engine):
         assert len(measurements.session_history(db, sid)) == 4
         with pytest.raises(NotFoundError):
             measurements.revise_measurement(db, other.id, value_mm=1.0)
+
+
+def _upgrade_in_process(url: str) -> None:
+    upgrade(make_engine(url))
+
+
+def test_processes_starting_together_migrate_one_after_the_other(db_url):
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("spawn")
+    procs = [ctx.Process(target=_upgrade_in_process, args=(db_url,)) for _ in range(3)]
+    for p in procs:
+        p.start()
+    for p in procs:
+        p.join(120)
+    assert [p.exitcode for p in procs] == [0, 0, 0]
+    assert current_revision(make_engine(db_url)) == head_revision()
