@@ -7,8 +7,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 
 @dataclass(frozen=True)
@@ -23,7 +21,10 @@ class BodyParams:
 
 
 def isolate(points: np.ndarray, background: np.ndarray | None, params: BodyParams = BodyParams()) -> np.ndarray:
-    """(N,) bool mask of the animal: off the background planes, largest connected cluster."""
+    """(N,) bool mask of the animal: off the background planes, then the largest cluster of points
+    connected through occupied voxels of ``cluster_mm`` (26-neighbourhood)."""
+    from scipy import ndimage
+
     keep = np.isfinite(points).all(axis=1)
     if background is not None and len(background):
         d = np.abs(points @ background[:, :3].T - background[:, 3]).min(axis=1)
@@ -31,14 +32,20 @@ def isolate(points: np.ndarray, background: np.ndarray | None, params: BodyParam
     idx = np.nonzero(keep)[0]
     if len(idx) < params.min_group:
         return np.zeros(len(points), bool)
-    pairs = cKDTree(points[idx]).query_pairs(params.cluster_mm, output_type="ndarray")
-    from scipy.sparse import coo_matrix
-
-    g = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(idx), len(idx)))
-    _, comp = connected_components(g, directed=False)
-    biggest = np.argmax(np.bincount(comp))
+    voxel = params.cluster_mm
+    ijk = np.floor((points[idx] - points[idx].min(axis=0)) / voxel).astype(np.int64)
+    shape = tuple(ijk.max(axis=0) + 1)
+    if np.prod(shape) > 60_000_000:  # absurdly spread cloud: fall back to one cluster
+        out = np.zeros(len(points), bool)
+        out[idx] = True
+        return out
+    grid = np.zeros(shape, bool)
+    grid[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = True
+    labels, _ = ndimage.label(grid, structure=np.ones((3, 3, 3), bool))
+    lab = labels[ijk[:, 0], ijk[:, 1], ijk[:, 2]]
+    biggest = np.argmax(np.bincount(lab)[1:]) + 1
     out = np.zeros(len(points), bool)
-    out[idx[comp == biggest]] = True
+    out[idx[lab == biggest]] = True
     return out
 
 
