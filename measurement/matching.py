@@ -344,6 +344,8 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     while remaining.sum() >= 50:
         sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)
         seed = int(np.argmax(sizes))
+        if sizes[seed] < 30:  # only specks and stubs are left: too short to seed a piece of the animal
+            break
         trial = {seed: mid}
         _grow_all(c, rays, planes, seg, trial, remaining, left, right, tol, n, None, depth_only=True)
         _refine(c, rays, planes, seg, trial, remaining & np.isin(seg, list(trial)), left, right, tol, n)
