@@ -32,6 +32,7 @@ from measurement.images import read_image  # noqa: E402
 from measurement.paper import gray_centres_literal  # noqa: E402
 from measurement.pipeline import scan  # noqa: E402
 from measurement.simulate.capture import write_capture  # noqa: E402
+from measurement.simulate.truth import match_crossings  # noqa: E402
 
 ANIMAL = 5
 
@@ -45,26 +46,13 @@ def capture_for(cache: Path, stripes: int, fur: bool, size: tuple[int, int], see
     return out
 
 
-def truth_of(points_uv: np.ndarray, truth: dict) -> tuple[np.ndarray, np.ndarray]:
-    """Truth stripe and kind for pixels (M, 2): the exact crossing in the same row nearest in column."""
-    order = np.lexsort((truth["uv"][:, 0], np.rint(truth["uv"][:, 1])))
-    key = np.rint(truth["uv"][order, 1]) * 1e5 + truth["uv"][order, 0]
-    q = np.rint(points_uv[:, 1]) * 1e5 + points_uv[:, 0]
-    idx = np.clip(np.searchsorted(key, q), 1, len(key) - 1)
-    cand = np.stack([idx - 1, idx], 1)
-    d = np.abs(key[cand] - q[:, None])
-    best = cand[np.arange(len(q)), d.argmin(1)]
-    near = d.min(1) < 1.5
-    return np.where(near, truth["stripe"][order][best], -1), np.where(near, truth["kind"][order][best], 0)
-
-
 def evaluate(cap: Path, view: str) -> dict:
     cal = load_calibration(cap / "truth" / "truth.json")
     info = json.loads((cap / "truth" / "truth.json").read_text())["views"][view]
     img = read_image(cap / "scan" / f"{view}.png")
     r = scan(img, cal, view)
     t = dict(np.load(cap / "truth" / f"{view}_stripes.npz"))
-    tk, kind = truth_of(r.scene_uv, t)
+    tk, kind = match_crossings(r.scene_uv, t)
     on_animal = kind == ANIMAL
     labelled_right = float(np.mean(r.scene_stripe[on_animal] == tk[on_animal])) if on_animal.any() else float("nan")
     bg = (kind == 2) | (kind == 3)

@@ -383,6 +383,7 @@ def _foreground_mask(seg: np.ndarray, is_bg: np.ndarray, on_bg: np.ndarray | Non
 
 
 def _labels_of(seg: np.ndarray, seg_label: dict[int, int], long_seg: np.ndarray) -> np.ndarray:
+    """Per-centre labels (M,) from a segment -> label map; -1 for short segments and unlabelled ones."""
     lab = np.full(seg.max() + 1, -1, np.int64)
     for s, k in seg_label.items():
         lab[s] = k
@@ -433,12 +434,7 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
         if not new:
             break
         seg_label.update(new)
-    lab = np.full(seg.max() + 1, -1, np.int64)
-    for s, k in seg_label.items():
-        lab[s] = k
-    out = lab[seg]
-    out[~long_seg] = -1
-    return out
+    return _labels_of(seg, seg_label, long_seg)
 
 
 def _background_planes(rays: np.ndarray, planes: np.ndarray, labels: np.ndarray, tol_mm: float = 8.0,
@@ -509,10 +505,7 @@ def _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, dep
           relabel=False, min_share=0.6, gaps=(1, 2, 3)) -> dict[int, int]:
     """Labels for unlabelled segments that continue a labelled neighbour's surface (one round). With
     ``relabel`` the labelled segments in ``long_seg`` are re-voted by their neighbours instead."""
-    lab = np.full(seg.max() + 1, -1, np.int64)
-    for s, k in seg_label.items():
-        lab[s] = k
-    cl = lab[seg]
+    cl = _labels_of(seg, seg_label, np.ones(len(seg), bool))
     votes: dict[int, dict[int, int]] = {}
     support: dict[int, int] = {}
     for nb, sign in ((left, 1), (right, -1)):

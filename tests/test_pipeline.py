@@ -10,6 +10,7 @@ from measurement.errors import ImageError, ScanError, StripeDetectionError
 from measurement.images import read_image
 from measurement.matching import denoise, label_centres
 from measurement.pipeline import scan
+from measurement.simulate.truth import match_crossings
 from measurement.triangulation import intersect, ray_table, rays_at
 
 
@@ -19,16 +20,7 @@ def truth_cal(small_capture) -> Calibration:
 
 
 def _truth_labels(small_capture, c):
-    t = np.load(small_capture / "truth" / "side_stripes.npz")
-    order = np.lexsort((t["uv"][:, 0], np.rint(t["uv"][:, 1])))
-    key = np.rint(t["uv"][order, 1]) * 1e5 + t["uv"][order, 0]
-    q = c.v.astype(np.float64) * 1e5 + c.u
-    idx = np.clip(np.searchsorted(key, q), 1, len(key) - 1)
-    cand = np.stack([idx - 1, idx], 1)
-    d = np.abs(key[cand] - q[:, None])
-    best = cand[np.arange(len(q)), d.argmin(1)]
-    near = d.min(1) < 1.5
-    return np.where(near, t["stripe"][order][best], -1), np.where(near, t["kind"][order][best], 0)
+    return match_crossings(np.column_stack([c.u, c.v]), dict(np.load(small_capture / "truth" / "side_stripes.npz")))
 
 
 def test_background_stripes_are_labelled_and_placed_exactly(small_capture, truth_cal):
