@@ -634,7 +634,7 @@ def _occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True,
         return None
     best = offs[i]
     # one conflict-free stretch only: a second one (the object could sit elsewhere too) is ambiguous
-    low = vals <= limit
+    low = vals <= max(4 * plateau, 0.03)  # a second valley, even a shallower one, makes it ambiguous
     runs = np.flatnonzero(np.diff(np.r_[0, low.astype(np.int8), 0]) == 1)
     if len(runs) > 1:
         return None
