@@ -170,6 +170,8 @@ def _anatomy_cam(anatomy: dict, R: np.ndarray, t: np.ndarray) -> dict:
         toward = -c / np.linalg.norm(c)  # toward the camera, made perpendicular to the neck axis
         ax = np.asarray(out["neck_axis"])
         toward -= ax * (toward @ ax) + up * (toward @ up)
+        if np.linalg.norm(toward) < 1e-6:  # looking straight along the neck's up direction (top view)
+            toward = np.cross(ax, up)
         toward /= np.linalg.norm(toward)
         ang = np.deg2rad(25.0)  # landmarks 25 deg off the silhouette, on the camera side: pickable
         marks = [c + r * (np.cos(ang) * s * up + np.sin(ang) * toward) for s in (1, -1)]
