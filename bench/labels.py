@@ -49,7 +49,7 @@ def main() -> None:
             c = c.take(denoise(c, img.shape))
             rays = rays_at(c.u, c.v, table)
             t0 = time.perf_counter()
-            lab = label_centres(c, rays, cal.planes, img.shape, intr=cal.intrinsics).stripe
+            lab = label_centres(c, rays, cal.planes, img.shape).stripe
             ms = 1000 * (time.perf_counter() - t0)
             truth, kind = match_crossings(np.column_stack([c.u, c.v]), dict(np.load(cap / "truth" / f"{view}_stripes.npz")))
             animal, bg = kind == 5, (kind == 2) | (kind == 3)

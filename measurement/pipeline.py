@@ -69,8 +69,7 @@ def scan(image: np.ndarray, calibration: Calibration, view: str = "side", ambien
         centres = centres.take(denoise(centres, image.shape[:2]))
     t["denoise"] = time.perf_counter()
     rays = rays_at(centres.u, centres.v, ray_table(calibration.intrinsics))
-    labels = label_centres(centres, rays, calibration.planes, image.shape[:2], params.matching,
-                           calibration.intrinsics)
+    labels = label_centres(centres, rays, calibration.planes, image.shape[:2], params.matching)
     t["match"] = time.perf_counter()
     seg_ids = labels.segment if labels.segment is not None else np.arange(len(centres))
     smooth_u, ok = smooth_along_segments(centres, seg_ids, labels.stripe)

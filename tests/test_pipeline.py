@@ -46,7 +46,7 @@ def test_animal_stripes_get_the_right_index_across_the_outline(small_capture, tr
     c = detect_centres(img)
     c = c.take(denoise(c, img.shape))
     rays = rays_at(c.u, c.v, ray_table(truth_cal.intrinsics))
-    labels = label_centres(c, rays, truth_cal.planes, img.shape, intr=truth_cal.intrinsics)
+    labels = label_centres(c, rays, truth_cal.planes, img.shape)
     truth, kind = _truth_labels(small_capture, c)
     animal = kind == 5
     got = animal & (labels.stripe >= 0)

@@ -1,0 +1,101 @@
+"""The absolute stripe index of an isolated piece of the animal, seen from the projector.
+
+Within a piece, depth continuity fixes the indices relative to each other; the offset comes from the
+projector's point of view: a background point lit by stripe k at projector elevation e proves nothing
+stood in front of it, so a wrong offset slides the piece onto lit background cells.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from .planes import pencil_axis
+from .triangulation import intersect
+
+_log = logging.getLogger(__name__)
+
+
+def projector_centre(planes: np.ndarray) -> np.ndarray:
+    """A point on the axis that all light planes share, at the camera's height (y = 0): the projector
+    centre of a level rig. The planes alone cannot fix it along the axis; a few centimetres off only
+    tilts rays by the ratio of that error to the working distance."""
+
+    p0, a = pencil_axis(planes)
+    return p0 - a * (p0[1] / a[1]) if abs(a[1]) > 1e-6 else p0
+
+
+def projector_right(planes: np.ndarray) -> bool:
+    """Whether the projector sits right of the camera (positive x), from the planes' shared axis."""
+    return bool(projector_centre(planes)[0] > 0)
+
+
+def projector_elevation(points: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """Elevation of each point (M, 3) as seen from the projector along its stripe: tan of the angle
+    between the ray and the plane perpendicular to the shared axis (the projector's row coordinate)."""
+
+    centre = projector_centre(planes)
+    _, a = pencil_axis(planes)
+    q = points - centre
+    along = q @ a
+    across = np.linalg.norm(q - along[:, None] * a, axis=1)
+    return along / np.maximum(across, 1e-9)
+
+
+def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, bins: float = 0.002,
+                      free: float = 0.01) -> int | None:
+    """Absolute offset of a cluster with relative labels ``r[idx]``, from the projector's point of view.
+
+    A background point lit by stripe k at projector elevation e proves that nothing stood in front of it
+    on that projector ray: the object must not occupy cell (k, e). Cells well inside a lit run (lit two
+    bins either side too) count, so the shadow's own edges do not. Offsets that slide the object onto lit
+    background conflict; those sliding it toward background the camera cannot see (behind the object)
+    do not, so the right offset is the conflict-free one nearest the conflicts: the lowest with the
+    projector right of the camera, the highest with it on the left.
+    """
+    bg = np.nonzero(cl >= 0)[0]
+    if len(bg) < 100:
+        return None
+    pb = intersect(rays[bg], planes[cl[bg]])
+    eb = np.floor(projector_elevation(pb, planes) / bins).astype(np.int64)
+    lit = np.unique(cl[bg] * 1_000_000 + eb)
+    deep = lit[np.isin(lit - 2, lit) & np.isin(lit + 2, lit) & np.isin(lit - 1, lit) & np.isin(lit + 1, lit)]
+    rr = r[idx]
+    sub = idx if len(idx) <= 20000 else idx[:: len(idx) // 20000 + 1]
+    rs = r[sub]
+    conflicts = {}
+    for off in range(-int(rr.max()), n - int(rr.min())):
+        k = rs + off
+        inside = (k >= 0) & (k < n)
+        if inside.mean() < 0.8:
+            continue
+        p = intersect(rays[sub][inside], planes[k[inside]])
+        e = np.floor(projector_elevation(p, planes) / bins).astype(np.int64)
+        cells = np.unique(k[inside] * 1_000_000 + e)
+        conflicts[off] = float(np.isin(cells, deep).mean())
+    if not conflicts:
+        return None
+    _log.debug("occlusion conflicts %s", sorted(conflicts.items()))
+    offs = sorted(conflicts)
+    vals = np.array([conflicts[o] for o in offs])
+    if not projector_right:  # mirror, so the conflicts always rise toward lower offsets
+        offs, vals = offs[::-1], vals[::-1]
+    if len(vals) < 5:
+        return None
+    roll = np.array([np.median(vals[i:i + 4]) for i in range(len(vals) - 3)])
+    plateau = float(roll.min())
+    limit = max(2 * plateau, free)
+    j = int(np.argmin(roll))
+    i = j + int(np.argmin(vals[j:j + 4]))
+    while i > 0 and vals[i - 1] <= limit:  # walk toward the conflicts while still conflict-free
+        i -= 1
+    if i == 0 or vals[i - 1] < 2 * max(plateau, 0.005):
+        return None
+    best = offs[i]
+    # one conflict-free stretch only: a second one (the object could sit elsewhere too) is ambiguous
+    low = vals <= max(4 * plateau, 0.03)  # a second valley, even a shallower one, makes it ambiguous
+    runs = np.flatnonzero(np.diff(np.r_[0, low.astype(np.int8), 0]) == 1)
+    if len(runs) > 1:
+        return None
+    return int(best)

@@ -1,0 +1,157 @@
+"""Stripe segments: centres linked from row to row, cut where a stripe passes onto another surface,
+denoised (Algorithm 3) and smoothed along the stripe."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from .detection import Centres
+
+
+def denoise(c: Centres, shape: tuple[int, int]) -> np.ndarray:
+    """Algorithm 3's denoising: keep a centre when its neighbourhood (a square one average stripe width
+    wide) holds at least half that many centres — a stripe contributes one per row, a speck of scattered
+    light only a few. returns (M,) bool keep-mask."""
+    if len(c) == 0:
+        return np.zeros(0, bool)
+    wdt = int(np.clip(round(float(np.median(c.width))), 3, 25))
+    h, w = shape
+    mask = np.zeros((h, w), np.float32)
+    ui = np.clip(np.rint(c.u).astype(np.int64), 0, w - 1)
+    mask[c.v, ui] = 1.0
+    counts = cv2.boxFilter(mask, -1, (wdt, wdt), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    return counts[c.v, ui] >= 0.5 * wdt
+
+
+def link_segments(c: Centres, link_px: float) -> np.ndarray:
+    """Segment id (M,) per centre: centres in consecutive rows (or one row apart) within ``link_px``
+    columns, linked one-to-one (mutual nearest), then connected components."""
+    m = len(c)
+    if m == 0:
+        return np.zeros(0, np.int64)
+    order = np.lexsort((c.u, c.v))
+    key = c.v[order].astype(np.float64) * 1e5 + c.u[order]
+    src, dst = [], []
+    for gap in (1, 2):
+        tgt = key + gap * 1e5
+        idx = np.clip(np.searchsorted(key, tgt), 1, m - 1)
+        cand = np.stack([idx - 1, idx], axis=1)
+        dist = np.abs(key[cand] - tgt[:, None])
+        best = cand[np.arange(m), dist.argmin(axis=1)]
+        d = np.abs(key[best] - tgt)
+        ok = d <= link_px * gap
+        a, b = np.arange(m)[ok], best[ok]
+        # mutual: b's nearest in the row above is a
+        back_t = key[b] - gap * 1e5
+        bidx = np.clip(np.searchsorted(key, back_t), 1, m - 1)
+        bc = np.stack([bidx - 1, bidx], axis=1)
+        bbest = bc[np.arange(len(b)), np.abs(key[bc] - back_t[:, None]).argmin(axis=1)]
+        mutual = bbest == a
+        src.append(a[mutual])
+        dst.append(b[mutual])
+    s, d = np.concatenate(src), np.concatenate(dst)
+    graph = coo_matrix((np.ones(len(s)), (s, d)), shape=(m, m))
+    _, comp = connected_components(graph, directed=False)
+    seg = np.empty(m, np.int64)
+    seg[order] = comp
+    return seg
+
+
+def split_at_changes(c: Centres, seg: np.ndarray, window: int = 8, ratio: float = 1.8,
+                     slope_change: float = 0.35) -> np.ndarray:
+    """Cut segments where a stripe passes onto another surface without a visible gap: the stripe's
+    brightness above background jumps (another albedo, distance, angle) or its direction kinks. Label-
+    free, so a stripe that crossed the animal's outline in the image is separated before any index is
+    given. Returns new segment ids (M,)."""
+    out = seg.copy()
+    nxt = seg.max() + 1
+    order = np.lexsort((c.v, seg))
+    s_sorted = seg[order]
+    starts = np.r_[0, np.nonzero(s_sorted[1:] != s_sorted[:-1])[0] + 1, len(order)]
+    logc = np.log(np.maximum(c.contrast.astype(np.float64), 1.0))
+    for a, b in zip(starts[:-1], starts[1:], strict=True):
+        if b - a < 2 * window + 2:
+            continue
+        idx = order[a:b]
+        lc = logc[idx]
+        u, v = c.u[idx], c.v[idx].astype(np.float64)
+        cs = np.r_[0.0, np.cumsum(lc)]
+        i = np.arange(window, len(idx) - window)
+        before = (cs[i] - cs[i - window]) / window
+        after = (cs[i + window] - cs[i]) / window
+        jump = np.abs(after - before)
+        # slopes du/dv on each side by least squares over the window
+        sb = _slopes(u, v, i - window, i)
+        sa = _slopes(u, v, i, i + window)
+        kink = np.abs(sa - sb)
+        score = np.maximum(jump / np.log(ratio), kink / slope_change)
+        cuts = []
+        j = 0
+        while j < len(i):
+            if score[j] >= 1.0:
+                k = j + int(np.argmax(score[j:j + window]))
+                cuts.append(i[k])
+                j = k + window
+            else:
+                j += 1
+        for cpos in cuts:
+            out[idx[cpos:]] = nxt
+            nxt += 1
+    return out
+
+
+def _slopes(u: np.ndarray, v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    cu, cv = np.r_[0.0, np.cumsum(u)], np.r_[0.0, np.cumsum(v)]
+    cuv, cvv = np.r_[0.0, np.cumsum(u * v)], np.r_[0.0, np.cumsum(v * v)]
+    n = (hi - lo).astype(np.float64)
+    su, sv = cu[hi] - cu[lo], cv[hi] - cv[lo]
+    suv, svv = cuv[hi] - cuv[lo], cvv[hi] - cvv[lo]
+    den = n * svv - sv * sv
+    return np.where(den > 1e-9, (n * suv - su * sv) / np.maximum(den, 1e-9), 0.0)
+
+
+def row_neighbours(c: Centres) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the left and right neighbour of each centre in its row (-1 at the row's ends)."""
+    order = np.lexsort((c.u, c.v))
+    left = np.full(len(c), -1, np.int64)
+    right = np.full(len(c), -1, np.int64)
+    same = c.v[order][1:] == c.v[order][:-1]
+    left[order[1:][same]] = order[:-1][same]
+    right[order[:-1][same]] = order[1:][same]
+    return left, right
+
+
+def smooth_along_segments(c: Centres, segment: np.ndarray, labels: np.ndarray, half: int = 2,
+                          outlier_px: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Average each centre's column with its neighbours along its stripe segment (+-``half`` rows; the
+    surface is smooth over a couple of millimetres along a stripe, fur noise is not) and flag centres
+    more than ``outlier_px`` off the median of their neighbourhood (specks of scattered light).
+
+    returns : smoothed u (M,) float64, keep mask (M,) bool
+    """
+    u = c.u.copy()
+    keep = labels >= 0
+    idx = np.nonzero(keep)[0]
+    if len(idx) == 0:
+        return u, keep
+    order = idx[np.lexsort((c.v[idx], segment[idx]))]
+    s_sorted = segment[order]
+    starts = np.r_[0, np.nonzero(s_sorted[1:] != s_sorted[:-1])[0] + 1, len(order)]
+    win = 2 * half + 1
+    for a, b in zip(starts[:-1], starts[1:], strict=True):
+        if b - a < win:
+            continue
+        ids = order[a:b]
+        x = c.u[ids]
+        pad = np.pad(x, half, mode="edge")
+        stack = np.lib.stride_tricks.sliding_window_view(pad, win)
+        med = np.median(stack, axis=1)
+        bad = np.abs(x - med) > outlier_px
+        good = np.where(bad, med, x)
+        cs = np.r_[0.0, np.cumsum(np.pad(good, half, mode="edge"))]
+        u[ids] = (cs[win:] - cs[:-win]) / win
+        keep[ids[bad]] = False
+    return u, keep
