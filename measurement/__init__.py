@@ -8,6 +8,7 @@ Public API (what the CLI, the jobs and the benchmarks call):
 - ``scan(image, calibration, view="side", ambient=None)`` -> ``ScanResult``
 """
 
+from .calibration import load_calibration
 from .errors import (
     CalibrationError,
     CaptureError,
@@ -16,6 +17,7 @@ from .errors import (
     ScanError,
     StripeDetectionError,
 )
+from .pipeline import ScanResult, scan
 
 __all__ = [
     "CalibrationError",
@@ -23,5 +25,8 @@ __all__ = [
     "ImageError",
     "MeasurementError",
     "ScanError",
+    "ScanResult",
     "StripeDetectionError",
+    "load_calibration",
+    "scan",
 ]
