@@ -1,0 +1,74 @@
+"""Stripe-centre detection: the vectorised Algorithm 2 against its literal transcription, centres against
+the simulator's exact crossings, and refusals of unusable images."""
+
+import numpy as np
+import pytest
+
+from measurement.detection import algorithm2_boundaries, algorithm2_centres, check_image, detect_centres
+from measurement.errors import ImageError, StripeDetectionError
+from measurement.images import read_image
+from measurement.paper import boundaries_literal
+from measurement.simulate.truth import match_crossings
+
+
+@pytest.mark.parametrize("window", [1, 2, 3, 5])
+@pytest.mark.parametrize("density", [0.1, 0.3, 0.5])
+def test_vectorised_algorithm2_equals_the_literal_per_pixel_loop(window, density):
+    rng = np.random.default_rng(int(density * 10) + window)
+    binary = (rng.random((30, 160)) < density).astype(np.uint8)
+    binary[:, 40:50] = 1
+    binary[:, [39, 50]] = 0
+    rows, left, right = algorithm2_boundaries(binary, window, 0.5)
+    assert list(zip(rows.tolist(), left.tolist(), right.tolist(), strict=True)) == \
+        boundaries_literal(binary, window, 0.5)
+
+
+def test_algorithm2_centre_of_a_clean_run_is_its_middle():
+    img = np.zeros((5, 100), np.uint8)
+    img[:, 30:39] = 200  # run of pixels 30..38, middle 34
+    c = algorithm2_centres(img, window=3, local_px=31, offset=4)
+    assert len(c) == 5 and np.allclose(c.u, 34.0) and (c.v == np.arange(5)).all()
+
+
+def _side(small_capture):
+    img = read_image(small_capture / "scan" / "side.png")
+    truth = dict(np.load(small_capture / "truth" / "side_stripes.npz"))
+    return img, truth
+
+
+def test_centres_lie_on_the_exact_plane_crossings(small_capture):
+    img, truth = _side(small_capture)
+    c = detect_centres(img)
+    label, kind = match_crossings(np.column_stack([c.u, c.v]), truth)
+    assert np.mean(label >= 0) > 0.8  # most centres are real crossings
+    found = truth["kind"] != 0
+    assert len(c) > 0.8 * found.sum()
+    # sub-pixel error on the wall (no fur): the centroid beats Algorithm 2's boundary midpoint
+    order = np.lexsort((truth["uv"][:, 0], np.rint(truth["uv"][:, 1])))
+    key = np.rint(truth["uv"][order, 1]) * 1e5 + truth["uv"][order, 0]
+
+    def wall_rms(u, v):
+        q = v * 1e5 + u
+        i = np.clip(np.searchsorted(key, q), 1, len(key) - 1)
+        d = np.where(np.abs(key[i] - q) < np.abs(key[i - 1] - q), key[i] - q, key[i - 1] - q)
+        _, k = match_crossings(np.column_stack([u, v]), truth)
+        return float(np.sqrt(np.mean(d[k == 3] ** 2)))
+
+    alg2 = algorithm2_centres(img)
+    assert wall_rms(c.u, c.v) < 0.3
+    assert wall_rms(c.u, c.v) < wall_rms(alg2.u, alg2.v)
+
+
+def test_ambient_image_of_another_size_is_refused(small_capture):
+    img, _ = _side(small_capture)
+    with pytest.raises(ImageError, match="ambient"):
+        detect_centres(img, ambient=img[:100])
+
+
+def test_blank_saturated_and_wrong_size_images_are_refused():
+    with pytest.raises(StripeDetectionError, match="blank"):
+        check_image(np.full((200, 300), 30, np.uint8), (300, 200))
+    with pytest.raises(StripeDetectionError, match="saturated"):
+        check_image(np.full((200, 300), 255, np.uint8), (300, 200))
+    with pytest.raises(ImageError, match="calibration is for"):
+        check_image(np.zeros((200, 300), np.uint8), (3072, 2048))
