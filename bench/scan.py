@@ -129,7 +129,7 @@ def main() -> None:
     ap.add_argument("--cache", default="/tmp/bodyscan-bench")
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--seed", type=int, default=4)
-    ap.add_argument("--configs", default="40-fur,40-clean,50-fur")
+    ap.add_argument("--configs", default="40-fur,40-clean,50-fur,50-clean")
     args = ap.parse_args()
     size = tuple(int(v) for v in args.size.split("x"))
     cache = Path(args.cache)
