@@ -96,14 +96,19 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
     best = offs[i]
     # one conflict-free stretch only: a second one (the object could sit elsewhere too) is ambiguous
     low = vals <= max(4 * plateau, 0.03)  # a second valley, even a shallower one, makes it ambiguous
-    runs = np.flatnonzero(np.diff(np.r_[0, low.astype(np.int8), 0]) == 1)
-    if len(runs) > 1:
+    edges = np.diff(np.r_[0, low.astype(np.int8), 0])
+    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    # a single shallow dip between rising values is noise, not a second place the object could sit
+    valleys = [a for a, b in zip(starts, stops, strict=True)
+               if b - a >= 2 or vals[a] <= max(2 * plateau, free)]
+    if len(valleys) > 1:
         return None
     return int(best)
 
 
 def _knee(vals: np.ndarray, start: int, span: int = 5) -> int:
-    """Where the conflict curve leaves its floor, near index ``start`` (conflicts rise toward index 0).
+    """Where the conflict curve leaves its floor, at or just before index ``start`` (conflicts rise
+    toward index 0).
 
     A few centres of a piece whose relative indices are off by one put a small conflict share on the
     right offset too, so "the first conflict-free offset" can stop one step short. The knee is the
