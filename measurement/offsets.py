@@ -92,7 +92,6 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
         i -= 1
     if i == 0 or vals[i - 1] < 2 * max(plateau, 0.005):
         return None
-    i = _knee(vals, i)
     best = offs[i]
     # one conflict-free stretch only: a second one (the object could sit elsewhere too) is ambiguous
     low = vals <= max(4 * plateau, 0.03)  # a second valley, even a shallower one, makes it ambiguous
@@ -105,24 +104,3 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
         return None
     return int(best)
 
-
-def _knee(vals: np.ndarray, start: int, span: int = 5) -> int:
-    """Where the conflict curve leaves its floor, at or just before index ``start`` (conflicts rise
-    toward index 0).
-
-    A few centres of a piece whose relative indices are off by one put a small conflict share on the
-    right offset too, so "the first conflict-free offset" can stop one step short. The knee is the
-    index whose rising line (toward lower indices) plus flat floor (toward higher) fit the curve best.
-    """
-    best, best_i = np.inf, start
-    for i in range(max(2, start - 2), start + 1):  # only ever toward the conflicts
-        rise = vals[max(0, i - span): i + 1]
-        floor = vals[i: i + span]
-        x = np.arange(len(rise))
-        coef = np.polyfit(x, rise, 1)
-        if coef[0] >= 0:  # not rising toward the conflicts
-            continue
-        sse = float(((np.polyval(coef, x) - rise) ** 2).sum() + ((floor - floor.mean()) ** 2).sum())
-        if sse < best:
-            best, best_i = sse, i
-    return best_i
