@@ -23,13 +23,18 @@ def _truth_labels(small_capture, c):
     return match_crossings(np.column_stack([c.u, c.v]), dict(np.load(small_capture / "truth" / "side_stripes.npz")))
 
 
-def test_background_stripes_are_labelled_and_placed_exactly(small_capture, truth_cal):
+def _labelled_side(small_capture, truth_cal):
+    """Rays, labels and the truth (stripe, kind) of every centre of the small capture's side view."""
     img = read_image(small_capture / "scan" / "side.png")
     c = detect_centres(img)
     c = c.take(denoise(c, img.shape))
     rays = rays_at(c.u, c.v, ray_table(truth_cal.intrinsics))
     labels = label_centres(c, rays, truth_cal.planes, img.shape)
-    truth, kind = _truth_labels(small_capture, c)
+    return (rays, labels, *_truth_labels(small_capture, c))
+
+
+def test_background_stripes_are_labelled_and_placed_exactly(small_capture, truth_cal):
+    rays, labels, truth, kind = _labelled_side(small_capture, truth_cal)
     for code in (2, 3):  # floor, wall
         m = (kind == code) & (labels.stripe >= 0)
         assert m.sum() > 0.6 * (kind == code).sum()
@@ -42,12 +47,7 @@ def test_background_stripes_are_labelled_and_placed_exactly(small_capture, truth
 
 
 def test_animal_stripes_get_the_right_index_across_the_outline(small_capture, truth_cal):
-    img = read_image(small_capture / "scan" / "side.png")
-    c = detect_centres(img)
-    c = c.take(denoise(c, img.shape))
-    rays = rays_at(c.u, c.v, ray_table(truth_cal.intrinsics))
-    labels = label_centres(c, rays, truth_cal.planes, img.shape)
-    truth, kind = _truth_labels(small_capture, c)
+    rays, labels, truth, kind = _labelled_side(small_capture, truth_cal)
     animal = kind == 5
     got = animal & (labels.stripe >= 0)
     assert got.sum() > 0.6 * animal.sum()
