@@ -9,6 +9,7 @@ from fastapi import Depends, Request
 from sqlmodel import Session
 
 from app.config import Settings
+from storage.db import session_scope
 
 
 def get_app_settings(request: Request) -> Settings:
@@ -22,13 +23,8 @@ def get_db(request: Request) -> Iterator[Session]:
     Used with ``scope="function"`` so the commit happens before the response is sent: a client that
     reads the job id from a 202 can poll it at once, and a failing commit becomes the response.
     """
-    with Session(request.app.state.engine, expire_on_commit=False) as session:
-        try:
-            yield session
-            session.commit()
-        except BaseException:
-            session.rollback()
-            raise
+    with session_scope(request.app.state.engine) as session:
+        yield session
 
 
 SettingsDep = Annotated[Settings, Depends(get_app_settings)]

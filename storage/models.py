@@ -309,17 +309,3 @@ class Job(SQLModel, table=True):
     created_at: datetime = _ts_column()
     started_at: datetime | None = _ts_column(nullable=True)
     finished_at: datetime | None = _ts_column(nullable=True)
-
-
-class JobPublic(SQLModel):
-    id: int
-    kind: str
-    status: JobStatus
-    progress: float
-    stage: str
-    error: str | None
-    result_id: int
-    attempts: int
-    created_at: UTCDateTime
-    started_at: UTCDateTime | None
-    finished_at: UTCDateTime | None

@@ -174,3 +174,24 @@ def backend_client(backend: str, tmp_path: Path, **overrides):
     finally:
         if url:
             drop_postgres_database(url)
+
+
+# --- database fixtures shared by the storage and job tests (import them into the test module) ------
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def db_url(request, tmp_path):
+    """A SQLite file, and a fresh database on the test PostgreSQL server (skipped when there is none)."""
+    if request.param == "sqlite":
+        yield f"sqlite:///{tmp_path / 'bodyscan.db'}"
+        return
+    url = fresh_postgres_database()
+    yield url
+    drop_postgres_database(url)
+
+
+@pytest.fixture
+def engine(db_url):
+    """An engine on ``db_url`` migrated to the newest schema."""
+    engine = migrated_engine(db_url)
+    yield engine
+    engine.dispose()

@@ -8,6 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+# the database fixtures (db_url on SQLite and PostgreSQL, a migrated engine) live with the backend helpers
+pytest_plugins = ("tests.backend_support",)
+
 SMALL = (1024, 683)
 
 

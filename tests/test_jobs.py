@@ -7,7 +7,6 @@ import os
 import socket
 import time
 
-import pytest
 from sqlmodel import Session, select
 
 from app import jobs as runner
@@ -18,31 +17,11 @@ from storage.db import session_scope
 from storage.jobs import claim_next, finish_job, get_job, heartbeat, release_job, requeue_stale
 from storage.models import Calibration, Job, JobKind, JobStatus
 from tests.backend_support import (
-    drop_postgres_database,
-    fresh_postgres_database,
-    migrated_engine,
     png,
     settings_for,
 )
 
 RIG = {"board_cols": 9, "board_rows": 6, "square_mm": 20.0, "stripes": 40}
-
-
-@pytest.fixture(params=["sqlite", "postgresql"])
-def db_url(request, tmp_path):
-    if request.param == "sqlite":
-        yield f"sqlite:///{tmp_path / 'bodyscan.db'}"
-        return
-    url = fresh_postgres_database()
-    yield url
-    drop_postgres_database(url)
-
-
-@pytest.fixture
-def engine(db_url):
-    engine = migrated_engine(db_url)
-    yield engine
-    engine.dispose()
 
 
 def queue_calibrations(engine, n: int) -> list[int]:

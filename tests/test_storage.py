@@ -15,28 +15,9 @@ from storage.db import current_revision, head_revision, make_engine, session_sco
 from storage.errors import ConflictError, NotFoundError
 from storage.models import AnimalCreate, AnimalUpdate, SessionCreate
 from tests.backend_support import (
-    drop_postgres_database,
     finished_calibration,
-    fresh_postgres_database,
     migrated_engine,
 )
-
-
-@pytest.fixture(params=["sqlite", "postgresql"])
-def db_url(request, tmp_path):
-    if request.param == "sqlite":
-        yield f"sqlite:///{tmp_path / 'bodyscan.db'}"
-        return
-    url = fresh_postgres_database()
-    yield url
-    drop_postgres_database(url)
-
-
-@pytest.fixture
-def engine(db_url):
-    engine = migrated_engine(db_url)
-    yield engine
-    engine.dispose()
 
 
 def test_migrations_produce_exactly_the_model_schema(engine):
