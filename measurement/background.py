@@ -45,10 +45,32 @@ def on_plane_fractions(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarr
                         ) -> np.ndarray:
     """(N,) share of the rays (m, 3) whose point on light plane k lies within ``tol_mm`` of a background
     plane, for every k at once."""
-    z = depth_for_labels(rays, planes)  # (m, N)
-    pts = rays[:, None, :] * z[:, :, None]  # (m, N, 3)
-    d = np.abs(pts @ bg_planes[:, :3].T - bg_planes[:, 3]).min(axis=2)
-    return (np.nan_to_num(d, nan=np.inf) < tol_mm).mean(axis=0)
+    return _near_any_plane(rays, planes, bg_planes, tol_mm).mean(axis=0)
+
+
+def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray, tol_mm: float,
+                    chunk: int = 4096) -> np.ndarray:
+    """(m, N) True where ray i's point on light plane k lies within ``tol_mm`` of a background plane."""
+    out = np.empty((len(rays), len(planes)), bool)
+    for a in range(0, len(rays), chunk):  # in chunks: the (m, N, 3) points of all rays would be large
+        r = rays[a:a + chunk]
+        z = depth_for_labels(r, planes)  # (m, N)
+        pts = r[:, None, :] * z[:, :, None]  # (m, N, 3)
+        d = np.abs(pts @ bg_planes[:, :3].T - bg_planes[:, 3]).min(axis=2)
+        out[a:a + chunk] = np.nan_to_num(d, nan=np.inf) < tol_mm
+    return out
+
+
+def _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm):
+    """on_plane_fractions of each segment in ``sids`` (S,) (all of its centres): (S, N), and the
+    centres (K,) grouped by segment in the order of ``sids``, with their group starts (S + 1,)."""
+    idx = np.nonzero(np.isin(seg, sids))[0]
+    idx = idx[np.argsort(seg[idx], kind="stable")]
+    starts = np.searchsorted(seg[idx], sids)
+    near = _near_any_plane(rays[idx], planes, bg_planes, tol_mm)
+    counts = np.add.reduceat(near, starts, axis=0, dtype=np.int64) if len(sids) else near[:0]
+    sizes = np.diff(np.r_[starts, len(idx)])
+    return counts / sizes[:, None], idx, np.r_[starts, len(idx)]
 
 
 def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, min_rows: int = 15,
@@ -59,32 +81,35 @@ def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, mi
     labelled[list(seg_label)] = True
     cand = long_seg & ~labelled[seg]
     sizes = np.bincount(seg[cand], minlength=seg.max() + 1)
-    out = {}
-    for sid in np.nonzero(sizes >= min_rows)[0]:
-        frac = on_plane_fractions(rays[seg == sid], planes, bg_planes, tol_mm)
-        hits = np.nonzero(frac >= share)[0]
-        if len(hits) == 1:
-            out[int(sid)] = int(hits[0])
-    return out
+    sids = np.nonzero(sizes >= min_rows)[0]
+    frac, _, _ = _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm)
+    hits = frac >= share
+    one = np.nonzero(hits.sum(axis=1) == 1)[0]
+    return dict(zip(sids[one].tolist(), hits[one].argmax(axis=1).tolist(), strict=True))
 
 
 def background_like(rays, planes, seg, mask, bg_planes, exclude: set, share: float = 0.8) -> np.ndarray:
     """(M,) True for centres of segments (in ``mask``, not in ``exclude``) that some stripe index puts
     on a background plane for at least ``share`` of their points."""
     out = np.zeros(len(seg), bool)
-    for sid in np.unique(seg[mask]):
-        if int(sid) in exclude:
-            continue
-        idx = np.nonzero(seg == sid)[0]
-        if on_plane_fractions(rays[idx], planes, bg_planes, 8.0).max() >= share:
-            out[idx] = True
+    sids = np.unique(seg[mask])
+    sids = sids[~np.isin(sids, np.fromiter(exclude, np.int64, len(exclude)))]
+    frac, idx, starts = _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, 8.0)
+    like = frac.max(axis=1, initial=0.0) >= share
+    out[idx[np.repeat(like, np.diff(starts))]] = True
     return out
 
 
-def segment_on_planes(rays, planes, seg, sid, k, bg_planes, share: float = 0.9) -> bool:
-    idx = np.nonzero(seg == sid)[0]
-    pts = intersect(rays[idx], planes[np.full(len(idx), k)])
-    return bool(near_planes(pts, bg_planes).mean() >= share)
+def segments_on_planes(rays, planes, seg, seg_label: dict[int, int], bg_planes, share: float = 0.9) -> set[int]:
+    """The segments of ``seg_label`` (segment -> stripe index) whose points, on their stripe's plane, lie
+    on the background planes for at least ``share`` of their centres."""
+    table = np.full(seg.max() + 1, -1, np.int64)
+    table[np.fromiter(seg_label.keys(), np.int64)] = np.fromiter(seg_label.values(), np.int64)
+    idx = np.nonzero(table[seg] >= 0)[0]
+    near = near_planes(intersect(rays[idx], planes[table[seg[idx]]]), bg_planes)
+    sids = np.fromiter(seg_label.keys(), np.int64)
+    on = np.bincount(seg[idx], weights=near)[sids] / np.bincount(seg[idx])[sids] >= share
+    return set(sids[on].tolist())
 
 
 def split_foreground(c, seg, labels, on_bg, link, min_rows):
@@ -92,14 +117,7 @@ def split_foreground(c, seg, labels, on_bg, link, min_rows):
     m = len(seg)
     fg = (labels < 0) | ~on_bg
     # near the junction of a merged segment the last background-looking centres are suspect too
-    mixed = np.unique(seg[fg & (labels >= 0)])
-    for s in mixed:
-        idx = np.nonzero(seg == s)[0]
-        fv = c.v[idx][fg[idx]]
-        if len(fv) == 0:
-            continue
-        gap = np.min(np.abs(c.v[idx][:, None].astype(np.int64) - fv[None, :].astype(np.int64)), axis=1)
-        fg[idx[gap <= 15]] = True
+    fg |= _rows_to_foreground(seg, c.v, fg, fg & (labels >= 0)) <= 15
     fg_idx = np.nonzero(fg)[0]
     sub = c.take(fg)
     fseg = split_at_changes(sub, link_segments(sub, link)) if len(fg_idx) else np.zeros(0, np.int64)
@@ -109,5 +127,31 @@ def split_foreground(c, seg, labels, on_bg, link, min_rows):
     long_seg[~fg] = np.bincount(seg[~fg])[seg[~fg]] >= min_rows if (~fg).any() else False
     if len(fg_idx):
         long_seg[fg_idx] = np.bincount(fseg)[fseg] >= min_rows
-    seg_label = {int(s): int(k) for s, k in zip(new[~fg], labels[~fg], strict=True) if k >= 0}
+    kept = np.nonzero(~fg & (labels >= 0))[0]
+    sids, first = np.unique(new[kept], return_index=True)
+    _, last = np.unique(new[kept][::-1], return_index=True)
+    by_first = np.argsort(first)
+    seg_label = dict(zip(sids[by_first].tolist(), labels[kept][len(kept) - 1 - last[by_first]].tolist(),
+                         strict=True))
     return new, long_seg, seg_label
+
+
+def _rows_to_foreground(seg: np.ndarray, v: np.ndarray, fg: np.ndarray, mixed_by: np.ndarray) -> np.ndarray:
+    """(M,) rows from each centre to the nearest foreground centre of its segment, for the segments
+    holding a centre in ``mixed_by``; a large number elsewhere."""
+    out = np.full(len(seg), np.iinfo(np.int64).max)
+    mixed = np.zeros(seg.max() + 1, bool)
+    mixed[seg[mixed_by]] = True
+    idx = np.nonzero(mixed[seg])[0]
+    if len(idx) == 0:
+        return out
+    span = int(v.max()) + 1
+    key = seg[idx] * span + v[idx].astype(np.int64)
+    fkey = np.sort(key[fg[idx]])
+    pos = np.searchsorted(fkey, key)
+    gap = np.full(len(idx), np.iinfo(np.int64).max)
+    for nb in (np.clip(pos - 1, 0, len(fkey) - 1), np.clip(pos, 0, len(fkey) - 1)):
+        same = fkey[nb] // span == seg[idx]
+        gap[same] = np.minimum(gap[same], np.abs(fkey[nb] - key)[same])
+    out[idx] = gap
+    return out

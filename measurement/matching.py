@@ -28,7 +28,7 @@ from .background import (
     background_planes,
     claim_background,
     near_planes,
-    segment_on_planes,
+    segments_on_planes,
     split_foreground,
 )
 from .detection import Centres
@@ -80,20 +80,19 @@ def main_row_labels(c: Centres, n: int) -> np.ndarray:
 
 
 def _segment_vote(seg: np.ndarray, labels: np.ndarray, min_share: float = 0.8) -> dict[int, int]:
-    """Segment -> label where the labelled centres of the segment agree."""
+    """Segment -> label where the labelled centres of the segment agree (the most frequent label, the
+    lowest of a tie, holding at least ``min_share`` of them)."""
     has = labels >= 0
     if not has.any():
         return {}
     pairs = seg[has] * 100000 + labels[has]
     uniq, cnt = np.unique(pairs, return_counts=True)
     segs, labs = uniq // 100000, uniq % 100000
-    out = {}
-    for s in np.unique(segs):
-        m = segs == s
-        best = np.argmax(cnt[m])
-        if cnt[m][best] >= min_share * cnt[m].sum():
-            out[int(s)] = int(labs[m][best])
-    return out
+    order = np.lexsort((labs, -cnt, segs))
+    first = order[np.r_[True, segs[order][1:] != segs[order][:-1]]]
+    total = np.bincount(segs, weights=cnt)[segs[first]]
+    agree = first[cnt[first] >= min_share * total]
+    return dict(zip(segs[agree].tolist(), labs[agree].tolist(), strict=True))
 
 
 @dataclass(frozen=True, eq=False)
@@ -208,8 +207,8 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
 def _labels_of(seg: np.ndarray, seg_label: dict[int, int], long_seg: np.ndarray) -> np.ndarray:
     """Per-centre labels (M,) from a segment -> label map; -1 for short segments and unlabelled ones."""
     lab = np.full(seg.max() + 1, -1, np.int64)
-    for s, k in seg_label.items():
-        lab[s] = k
+    if seg_label:
+        lab[np.fromiter(seg_label.keys(), np.int64)] = np.fromiter(seg_label.values(), np.int64)
     out = lab[seg]
     out[~long_seg] = -1
     return out
@@ -224,10 +223,11 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
         new = _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, depth_only,
                     min_share=min_share, gaps=gaps)
         if bg_planes is not None and new:
-            new = {s: k for s, k in new.items() if segment_on_planes(rays, planes, seg, s, k, bg_planes)}
+            on = segments_on_planes(rays, planes, seg, new, bg_planes)
+            new = {s: k for s, k in new.items() if s in on}
         if avoid_planes is not None and new:
-            new = {s: k for s, k in new.items()
-                   if not segment_on_planes(rays, planes, seg, s, k, avoid_planes, share=0.5)}
+            on = segments_on_planes(rays, planes, seg, new, avoid_planes, share=0.5)
+            new = {s: k for s, k in new.items() if s not in on}
         if not new:
             break
         seg_label.update(new)
@@ -236,7 +236,7 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
 
 def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
     """Median 3D distance between labelled row neighbours with consecutive labels (mm)."""
-    lab = np.array([seg_label.get(int(s), -1) for s in seg])
+    lab = _labels_of(seg, seg_label, np.ones(len(seg), bool))
     have = (lab >= 0) & (left >= 0)
     have[have] &= lab[left[have]] == lab[have] - 1
     idx = np.nonzero(have)[0]
@@ -252,8 +252,7 @@ def _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, dep
     """Labels for unlabelled segments that continue a labelled neighbour's surface (one round). With
     ``relabel`` the labelled segments in ``long_seg`` are re-voted by their neighbours instead."""
     cl = _labels_of(seg, seg_label, np.ones(len(seg), bool))
-    votes: dict[int, dict[int, int]] = {}
-    support: dict[int, int] = {}
+    voters, votes = [], []
     for nb, sign in ((left, 1), (right, -1)):
         target = (cl >= 0) if relabel else (cl < 0)
         idx = np.nonzero(target & long_seg & (nb >= 0))[0]
@@ -279,17 +278,30 @@ def _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, dep
                 d = np.linalg.norm(p - pn, axis=1) / gap
             better = okk & (d < best_d) & (d < tol_mm)
             best_k[better], best_d[better] = k[better], d[better]
-        for s, k in zip(seg[idx], best_k, strict=True):
-            support[int(s)] = support.get(int(s), 0) + 1
-            if k >= 0:
-                vs = votes.setdefault(int(s), {})
-                vs[int(k)] = vs.get(int(k), 0) + 1
-    out = {}
-    for s, vs in votes.items():
-        k, cnt = max(vs.items(), key=lambda kv: kv[1])
-        if cnt >= 3 and cnt >= min_share * support[s]:
-            out[s] = k
-    return out
+        voters.append(seg[idx])
+        votes.append(best_k)
+    if not voters:
+        return {}
+    return _majority(np.concatenate(voters), np.concatenate(votes), n, min_share)
+
+
+def _majority(voter: np.ndarray, vote: np.ndarray, n: int, min_share: float) -> dict[int, int]:
+    """Segment -> label for the segments whose most frequent vote (the earliest cast of a tie) has at
+    least 3 votes and ``min_share`` of their voters. voter : (V,) segment ids; vote : (V,) labels in
+    [0, n), -1 for a voter that found no label (it still counts as support)."""
+    cast = np.nonzero(vote >= 0)[0]
+    if len(cast) == 0:
+        return {}
+    support = np.bincount(voter)
+    pair, first, cnt = np.unique(voter[cast] * (n + 1) + vote[cast], return_index=True, return_counts=True)
+    segs, labs = pair // (n + 1), pair % (n + 1)
+    order = np.lexsort((first, -cnt, segs))
+    best = order[np.r_[True, segs[order][1:] != segs[order][:-1]]]
+    best = best[(cnt[best] >= 3) & (cnt[best] >= min_share * support[segs[best]])]
+    seg_first = np.full(len(support), len(cast))
+    np.minimum.at(seg_first, segs, first)
+    best = best[np.argsort(seg_first[segs[best]])]  # in the order the segments first got a vote
+    return dict(zip(segs[best].tolist(), labs[best].tolist(), strict=True))
 
 
 def _refine(c, rays, planes, seg, seg_label, mask, left, right, tol_mm, n, rounds: int = 3) -> None:

@@ -69,48 +69,91 @@ def split_at_changes(c: Centres, seg: np.ndarray, window: int = 8, ratio: float 
     out = seg.copy()
     nxt = seg.max() + 1
     order = np.lexsort((c.v, seg))
-    s_sorted = seg[order]
-    starts = np.r_[0, np.nonzero(s_sorted[1:] != s_sorted[:-1])[0] + 1, len(order)]
+    starts = _runs(seg[order])
+    lengths = np.diff(starts)
     logc = np.log(np.maximum(c.contrast.astype(np.float64), 1.0))
-    for a, b in zip(starts[:-1], starts[1:], strict=True):
-        if b - a < 2 * window + 2:
-            continue
-        idx = order[a:b]
-        lc = logc[idx]
-        u, v = c.u[idx], c.v[idx].astype(np.float64)
-        cs = np.r_[0.0, np.cumsum(lc)]
-        i = np.arange(window, len(idx) - window)
-        before = (cs[i] - cs[i - window]) / window
-        after = (cs[i + window] - cs[i]) / window
+    cuts: dict[int, list[int]] = {}
+    long_runs = np.nonzero(lengths >= 2 * window + 2)[0]
+    for group in _length_buckets(lengths[long_runs]):
+        runs = long_runs[group]
+        n_rows = lengths[runs]
+        idx, valid = _gather(order, starts[runs], n_rows, np.arange(n_rows.max()))
+        lc = np.where(valid, logc[idx], 0.0)
+        u, v = np.where(valid, c.u[idx], 0.0), np.where(valid, c.v[idx].astype(np.float64), 0.0)
+        cs = _padded_cumsum(lc)
+        i = np.arange(window, idx.shape[1] - window)
+        before = (cs[:, i] - cs[:, i - window]) / window
+        after = (cs[:, i + window] - cs[:, i]) / window
         jump = np.abs(after - before)
         # slopes du/dv on each side by least squares over the window
         sb = _slopes(u, v, i - window, i)
         sa = _slopes(u, v, i, i + window)
         kink = np.abs(sa - sb)
         score = np.maximum(jump / np.log(ratio), kink / slope_change)
-        cuts = []
-        j = 0
-        while j < len(i):
-            if score[j] >= 1.0:
-                k = j + int(np.argmax(score[j:j + window]))
-                cuts.append(i[k])
-                j = k + window
-            else:
-                j += 1
-        for cpos in cuts:
+        inside = i[None, :] < (n_rows - window)[:, None]
+        for row in np.nonzero(((score >= 1.0) & inside).any(axis=1))[0]:
+            ks = _greedy_cuts(score[row, :n_rows[row] - 2 * window], window)
+            cuts[int(runs[row])] = [window + k for k in ks]
+    for run in sorted(cuts):  # new ids in segment order, as one segment at a time would hand them out
+        idx = order[starts[run]:starts[run + 1]]
+        for cpos in cuts[run]:
             out[idx[cpos:]] = nxt
             nxt += 1
     return out
 
 
+def _greedy_cuts(score: np.ndarray, window: int) -> list[int]:
+    """Positions of the cuts along one segment's scores (K,): from each score >= 1 the highest within
+    ``window``, then on past it by ``window``."""
+    cand = np.flatnonzero(score >= 1.0)
+    out: list[int] = []
+    j = 0
+    while True:
+        p = int(np.searchsorted(cand, j))
+        if p == len(cand):
+            return out
+        j = int(cand[p])
+        k = j + int(np.argmax(score[j:j + window]))
+        out.append(k)
+        j = k + window
+
+
 def _slopes(u: np.ndarray, v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    cu, cv = np.r_[0.0, np.cumsum(u)], np.r_[0.0, np.cumsum(v)]
-    cuv, cvv = np.r_[0.0, np.cumsum(u * v)], np.r_[0.0, np.cumsum(v * v)]
+    """Least-squares slopes du/dv (R, K) over columns [lo, hi) (K,) of the rows of u, v (R, L)."""
+    cu, cv = _padded_cumsum(u), _padded_cumsum(v)
+    cuv, cvv = _padded_cumsum(u * v), _padded_cumsum(v * v)
     n = (hi - lo).astype(np.float64)
-    su, sv = cu[hi] - cu[lo], cv[hi] - cv[lo]
-    suv, svv = cuv[hi] - cuv[lo], cvv[hi] - cvv[lo]
+    su, sv = cu[:, hi] - cu[:, lo], cv[:, hi] - cv[:, lo]
+    suv, svv = cuv[:, hi] - cuv[:, lo], cvv[:, hi] - cvv[:, lo]
     den = n * svv - sv * sv
     return np.where(den > 1e-9, (n * suv - su * sv) / np.maximum(den, 1e-9), 0.0)
+
+
+def _runs(keys: np.ndarray) -> np.ndarray:
+    """Start offsets (R + 1,) of the runs of equal values in sorted ``keys`` (K,), closed by len(keys)."""
+    return np.r_[0, np.nonzero(keys[1:] != keys[:-1])[0] + 1, len(keys)]
+
+
+def _length_buckets(lengths: np.ndarray):
+    """Indices of runs grouped by length within a factor of two, so that each group pads into one
+    (runs, longest) array without wasting much."""
+    level = np.floor(np.log2(np.maximum(lengths, 1))).astype(np.int64)
+    for lv in np.unique(level):
+        yield np.nonzero(level == lv)[0]
+
+
+def _gather(order: np.ndarray, starts: np.ndarray, lengths: np.ndarray, pos: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """Element indices (R, K) at positions ``pos`` (K,) of runs ``order[start:start + length]``, a
+    position outside a run clamped to its ends (edge padding), and where it was inside (R, K)."""
+    at = np.clip(pos[None, :], 0, lengths[:, None] - 1)
+    return order[starts[:, None] + at], (pos[None, :] >= 0) & (pos[None, :] < lengths[:, None])
+
+
+def _padded_cumsum(x: np.ndarray) -> np.ndarray:
+    """Running sums (R, L + 1) of the rows of x (R, L), each from 0: per row exactly ``np.r_[0,
+    np.cumsum(row)]`` (accumulation is sequential, so the sums round as they would one run at a time)."""
+    return np.cumsum(np.concatenate([np.zeros((len(x), 1)), x], axis=1), axis=1)
 
 
 def row_neighbours(c: Centres) -> tuple[np.ndarray, np.ndarray]:
@@ -138,20 +181,23 @@ def smooth_along_segments(c: Centres, segment: np.ndarray, labels: np.ndarray, h
     if len(idx) == 0:
         return u, keep
     order = idx[np.lexsort((c.v[idx], segment[idx]))]
-    s_sorted = segment[order]
-    starts = np.r_[0, np.nonzero(s_sorted[1:] != s_sorted[:-1])[0] + 1, len(order)]
+    starts = _runs(segment[order])
+    lengths = np.diff(starts)
     win = 2 * half + 1
-    for a, b in zip(starts[:-1], starts[1:], strict=True):
-        if b - a < win:
-            continue
-        ids = order[a:b]
-        x = c.u[ids]
-        pad = np.pad(x, half, mode="edge")
-        stack = np.lib.stride_tricks.sliding_window_view(pad, win)
-        med = np.median(stack, axis=1)
+    runs = np.nonzero(lengths >= win)[0]
+    for group in _length_buckets(lengths[runs]):
+        n_rows = lengths[runs[group]]
+        first = starts[runs[group]]
+        width = int(n_rows.max())
+        ids, valid = _gather(order, first, n_rows, np.arange(width))
+        padded, _ = _gather(order, first, n_rows, np.arange(-half, width + half))
+        xp = c.u[padded]  # edge-padded columns, (R, width + 2 half)
+        x = xp[:, half:half + width]
+        med = np.sort(np.lib.stride_tricks.sliding_window_view(xp, win, axis=1), axis=2)[:, :, half]
         bad = np.abs(x - med) > outlier_px
         good = np.where(bad, med, x)
-        cs = np.r_[0.0, np.cumsum(np.pad(good, half, mode="edge"))]
-        u[ids] = (cs[win:] - cs[:-win]) / win
-        keep[ids[bad]] = False
+        at = np.clip(np.arange(-half, width + half)[None, :], 0, n_rows[:, None] - 1)
+        cs = _padded_cumsum(np.take_along_axis(good, at, axis=1))
+        u[ids[valid]] = ((cs[:, win:win + width] - cs[:, :width]) / win)[valid]
+        keep[ids[valid & bad]] = False
     return u, keep
