@@ -49,52 +49,61 @@ def on_plane_fractions(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarr
 
 
 def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray, tol_mm: float,
-                    chunk: int = 4096) -> np.ndarray:
-    """(m, N) True where ray i's point on light plane k lies within ``tol_mm`` of a background plane."""
+                    depth: np.ndarray | None = None, chunk: int = 1024) -> np.ndarray:
+    """(m, N) True where ray i's point on light plane k lies within ``tol_mm`` of a background plane.
+    depth : (m, N) depth_for_labels(rays, planes) when already known"""
+    z_all = depth_for_labels(rays, planes) if depth is None else depth
     out = np.empty((len(rays), len(planes)), bool)
-    for a in range(0, len(rays), chunk):  # in chunks: the (m, N, 3) points of all rays would be large
-        r = rays[a:a + chunk]
-        z = depth_for_labels(r, planes)  # (m, N)
-        pts = r[:, None, :] * z[:, :, None]  # (m, N, 3)
-        d = np.abs(pts @ bg_planes[:, :3].T - bg_planes[:, 3]).min(axis=2)
-        out[a:a + chunk] = np.nan_to_num(d, nan=np.inf) < tol_mm
+    for a in range(0, len(rays), chunk):  # in chunks that stay in cache: (m, N, 3) points are large
+        r, z = rays[a:a + chunk], z_all[a:a + chunk]
+        on_bg = r[:, None, :] * z[:, :, None] @ bg_planes[:, :3].T  # (m, N, P)
+        # fmin skips NaN (a ray parallel to a plane) like the other plane's distance would
+        d = np.abs(on_bg[:, :, 0] - bg_planes[0, 3])
+        for p in range(1, len(bg_planes)):
+            d = np.fmin(d, np.abs(on_bg[:, :, p] - bg_planes[p, 3]))
+        out[a:a + chunk] = d < tol_mm
     return out
 
 
-def _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm):
+def _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm, depth=None):
     """on_plane_fractions of each segment in ``sids`` (S,) (all of its centres): (S, N), and the
-    centres (K,) grouped by segment in the order of ``sids``, with their group starts (S + 1,)."""
-    idx = np.nonzero(np.isin(seg, sids))[0]
+    centres (K,) grouped by segment in the order of ``sids``, with their group starts (S + 1,).
+    depth : (M, N) depth_for_labels(rays, planes) of all centres when already known"""
+    member = np.zeros(seg.max() + 1, bool)
+    member[sids] = True
+    idx = np.nonzero(member[seg])[0]
     idx = idx[np.argsort(seg[idx], kind="stable")]
     starts = np.searchsorted(seg[idx], sids)
-    near = _near_any_plane(rays[idx], planes, bg_planes, tol_mm)
+    near = _near_any_plane(rays[idx], planes, bg_planes, tol_mm, None if depth is None else depth[idx])
     counts = np.add.reduceat(near, starts, axis=0, dtype=np.int64) if len(sids) else near[:0]
     sizes = np.diff(np.r_[starts, len(idx)])
     return counts / sizes[:, None], idx, np.r_[starts, len(idx)]
 
 
 def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, min_rows: int = 15,
-                      share: float = 0.95, tol_mm: float = 5.0) -> dict[int, int]:
+                      share: float = 0.95, tol_mm: float = 5.0, depth=None) -> dict[int, int]:
     """Unlabelled segments that exactly one stripe index puts on a background plane (>= ``share`` of
-    their points within ``tol_mm``); animal stripes are curved and fit no single plane that way."""
+    their points within ``tol_mm``); animal stripes are curved and fit no single plane that way.
+    depth : (M, N) depth_for_labels(rays, planes) when already known"""
     labelled = np.zeros(seg.max() + 1, bool)
     labelled[list(seg_label)] = True
     cand = long_seg & ~labelled[seg]
     sizes = np.bincount(seg[cand], minlength=seg.max() + 1)
     sids = np.nonzero(sizes >= min_rows)[0]
-    frac, _, _ = _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm)
+    frac, _, _ = _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm, depth)
     hits = frac >= share
     one = np.nonzero(hits.sum(axis=1) == 1)[0]
     return dict(zip(sids[one].tolist(), hits[one].argmax(axis=1).tolist(), strict=True))
 
 
-def background_like(rays, planes, seg, mask, bg_planes, exclude: set, share: float = 0.8) -> np.ndarray:
+def background_like(rays, planes, seg, mask, bg_planes, exclude: set, share: float = 0.8, depth=None
+                    ) -> np.ndarray:
     """(M,) True for centres of segments (in ``mask``, not in ``exclude``) that some stripe index puts
-    on a background plane for at least ``share`` of their points."""
+    on a background plane for at least ``share`` of their points. depth : as in claim_background"""
     out = np.zeros(len(seg), bool)
     sids = np.unique(seg[mask])
     sids = sids[~np.isin(sids, np.fromiter(exclude, np.int64, len(exclude)))]
-    frac, idx, starts = _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, 8.0)
+    frac, idx, starts = _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, 8.0, depth)
     like = frac.max(axis=1, initial=0.0) >= share
     out[idx[np.repeat(like, np.diff(starts))]] = True
     return out

@@ -135,12 +135,12 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     tol = spacing_mm * params.continuity
     # 3: the background grows over its own surfaces; a segment joins it only if it then lies on them
     _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, 1.7 * spacing_mm, n, bg_planes)
+    z_all = depth_for_labels(rays, planes)  # (M, N): every centre on every light plane, computed once
     # 3b: unlabelled pieces of floor or wall (between the legs, beside the outline) are claimed by the
     # one label that puts them on a background plane
     if bg_planes is not None:
-        seg_label.update(claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n))
+        seg_label.update(claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, depth=z_all))
     # 4: foreground clusters: relative labels by growing from a seed, offset from the shadow they cast
-    z_all = depth_for_labels(rays, planes)
     fg_labels = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all,
                             params.depth_range_mm)
     if fg_labels:
@@ -149,7 +149,7 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
         is_bg[list(seg_label)] = True
         fg_mask = long_seg & ~is_bg[seg]
         if bg_planes is not None:  # leave alone what some index would put on the floor or wall
-            fg_mask &= ~background_like(rays, planes, seg, fg_mask, bg_planes, set(fg_labels))
+            fg_mask &= ~background_like(rays, planes, seg, fg_mask, bg_planes, set(fg_labels), depth=z_all)
         _grow_all(c, rays, planes, seg, fg_labels, fg_mask, left, right, tol, n, None, depth_only=True,
                   gaps=(1,), min_share=0.8)
     seg_label.update(fg_labels)
@@ -219,9 +219,10 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
     """Grow labels along continuous surfaces until nothing changes; returns per-centre labels.
     With ``bg_planes`` a segment only joins when its points then lie on those planes; with
     ``avoid_planes`` only when they do not."""
+    pairs = _neighbour_pairs(seg, long_seg, left, right)
     for _ in range(40):
         new = _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, depth_only,
-                    min_share=min_share, gaps=gaps)
+                    min_share=min_share, gaps=gaps, pairs=pairs)
         if bg_planes is not None and new:
             on = segments_on_planes(rays, planes, seg, new, bg_planes)
             new = {s: k for s, k in new.items() if s in on}
@@ -247,20 +248,33 @@ def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
     return float(np.median(np.linalg.norm(a - b, axis=1)))
 
 
-def _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, depth_only=False,
-          relabel=False, min_share=0.6, gaps=(1, 2, 3)) -> dict[int, int]:
-    """Labels for unlabelled segments that continue a labelled neighbour's surface (one round). With
-    ``relabel`` the labelled segments in ``long_seg`` are re-voted by their neighbours instead."""
-    cl = _labels_of(seg, seg_label, np.ones(len(seg), bool))
-    voters, votes = [], []
+def _neighbour_pairs(seg, mask, left, right) -> list[tuple[np.ndarray, np.ndarray, int]]:
+    """Per side (left, then right): the centres (K,) in ``mask`` whose row neighbour on that side lies in
+    another segment, that neighbour (K,), and the sign of the label step toward the centre."""
+    out = []
     for nb, sign in ((left, 1), (right, -1)):
-        target = (cl >= 0) if relabel else (cl < 0)
-        idx = np.nonzero(target & long_seg & (nb >= 0))[0]
-        idx = idx[(cl[nb[idx]] >= 0) & (seg[nb[idx]] != seg[idx])]
+        idx = np.nonzero(mask & (nb >= 0))[0]
+        idx = idx[seg[nb[idx]] != seg[idx]]
+        out.append((idx, nb[idx], sign))
+    return out
+
+
+def _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, depth_only=False,
+          relabel=False, min_share=0.6, gaps=(1, 2, 3), pairs=None) -> dict[int, int]:
+    """Labels for unlabelled segments that continue a labelled neighbour's surface (one round). With
+    ``relabel`` the labelled segments in ``long_seg`` are re-voted by their neighbours instead.
+    pairs : _neighbour_pairs(seg, long_seg, left, right), when a caller runs several rounds"""
+    table = np.full(seg.max() + 1, -1, np.int64)
+    if seg_label:
+        table[np.fromiter(seg_label.keys(), np.int64)] = np.fromiter(seg_label.values(), np.int64)
+    voters, votes = [], []
+    for idx, nbr, sign in pairs if pairs is not None else _neighbour_pairs(seg, long_seg, left, right):
+        own, kn = table[seg[idx]], table[seg[nbr]]
+        take = ((own >= 0) if relabel else (own < 0)) & (kn >= 0)
+        idx, nbr, kn = idx[take], nbr[take], kn[take]
         if len(idx) == 0:
             continue
-        kn = cl[nb[idx]]
-        pn = intersect(rays[nb[idx]], planes[kn])
+        pn = intersect(rays[nbr], planes[kn])
         best_k = np.full(len(idx), -1)
         best_d = np.full(len(idx), np.inf)
         for gap in gaps:
@@ -307,9 +321,10 @@ def _majority(voter: np.ndarray, vote: np.ndarray, n: int, min_share: float) -> 
 def _refine(c, rays, planes, seg, seg_label, mask, left, right, tol_mm, n, rounds: int = 3) -> None:
     """Re-vote each labelled segment in ``mask`` by its neighbours; a clear majority for another label
     (a growth step that took the wrong gap) replaces it. Updates ``seg_label`` in place."""
+    pairs = _neighbour_pairs(seg, mask, left, right)
     for _ in range(rounds):
         votes = _grow(c, rays, planes, seg, seg_label, mask, left, right, tol_mm, n, depth_only=True,
-                      relabel=True, min_share=0.7)
+                      relabel=True, min_share=0.7, pairs=pairs)
         changed = {s: k for s, k in votes.items() if seg_label.get(s) != k}
         if not changed:
             break
