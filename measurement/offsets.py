@@ -44,7 +44,7 @@ def projector_elevation(points: np.ndarray, planes: np.ndarray) -> np.ndarray:
 
 
 def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, bins: float = 0.002,
-                      free: float = 0.01) -> int | None:
+                      free: float = 0.01, pattern_edge: float = 0.02) -> int | None:
     """Absolute offset of a cluster with relative labels ``r[idx]``, from the projector's point of view.
 
     A background point lit by stripe k at projector elevation e proves that nothing stood in front of it
@@ -52,7 +52,8 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
     bins either side too) count, so the shadow's own edges do not. Offsets that slide the object onto lit
     background conflict; those sliding it toward background the camera cannot see (behind the object)
     do not, so the right offset is the conflict-free one nearest the conflicts: the lowest with the
-    projector right of the camera, the highest with it on the left.
+    projector right of the camera, the highest with it on the left. The result never puts more than
+    ``pattern_edge`` of the piece beyond the first or last stripe.
     """
     bg = np.nonzero(cl >= 0)[0]
     if len(bg) < 100:
@@ -65,9 +66,11 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
     sub = idx if len(idx) <= 20000 else idx[:: len(idx) // 20000 + 1]
     rs = r[sub]
     conflicts = {}
+    beyond = {}  # share of the piece that an offset pushes past the first (< 0) or last (>= n) stripe
     for off in range(-int(rr.max()), n - int(rr.min())):
         k = rs + off
         inside = (k >= 0) & (k < n)
+        beyond[off] = (float(np.mean(k < 0)), float(np.mean(k >= n)))
         if inside.mean() < 0.8:
             continue
         p = intersect(rays[sub][inside], planes[k[inside]])
@@ -102,5 +105,12 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
                if b - a >= 2 or vals[a] <= max(2 * plateau, free)]
     if len(valleys) > 1:
         return None
+    # the pattern has n stripes and no more: an offset that puts a real share of the piece past the last
+    # (or before the first) stripe is impossible, however conflict-free it looks (an animal that fills the
+    # pattern to its edge is common from above)
+    while beyond[best][1] > pattern_edge and best - 1 in conflicts:
+        best -= 1
+    while beyond[best][0] > pattern_edge and best + 1 in conflicts:
+        best += 1
     return int(best)
 
