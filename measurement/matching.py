@@ -33,7 +33,14 @@ from .background import (
 )
 from .detection import Centres
 from .offsets import occlusion_offset, projector_right
-from .segments import denoise, link_segments, row_neighbours, smooth_along_segments, split_at_changes
+from .segments import (
+    denoise,
+    link_segments,
+    row_neighbours,
+    row_order,
+    smooth_along_segments,
+    split_at_changes,
+)
 from .triangulation import depth_for_labels, intersect
 
 __all__ = ["Labels", "MatchingParams", "denoise", "label_centres", "link_segments", "smooth_along_segments"]
@@ -335,7 +342,7 @@ def _enforce_row_order(c: Centres, labels: np.ndarray) -> np.ndarray:
     """Within a row, labels must increase left to right; drop the centres that break the order (the
     minority of a longest increasing run would be better; dropping both sides of each inversion is
     simpler and loses few centres)."""
-    order = np.lexsort((c.u, c.v))
+    order = row_order(c)
     lab = labels[order]
     v = c.v[order]
     valid = lab >= 0

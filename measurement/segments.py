@@ -19,10 +19,11 @@ def denoise(c: Centres, shape: tuple[int, int]) -> np.ndarray:
         return np.zeros(0, bool)
     wdt = int(np.clip(round(float(np.median(c.width))), 3, 25))
     h, w = shape
-    mask = np.zeros((h, w), np.float32)
+    mask = np.zeros((h, w), np.uint8)
     ui = np.clip(np.rint(c.u).astype(np.int64), 0, w - 1)
-    mask[c.v, ui] = 1.0
-    counts = cv2.boxFilter(mask, -1, (wdt, wdt), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    mask[c.v, ui] = 1
+    # exact integer counts (at most 25 * 25), half the memory traffic of a float image
+    counts = cv2.boxFilter(mask, cv2.CV_16U, (wdt, wdt), normalize=False, borderType=cv2.BORDER_CONSTANT)
     return counts[c.v, ui] >= 0.5 * wdt
 
 
@@ -32,24 +33,16 @@ def link_segments(c: Centres, link_px: float) -> np.ndarray:
     m = len(c)
     if m == 0:
         return np.zeros(0, np.int64)
-    order = np.lexsort((c.u, c.v))
+    order = row_order(c)
     key = c.v[order].astype(np.float64) * 1e5 + c.u[order]
     src, dst = [], []
     for gap in (1, 2):
         tgt = key + gap * 1e5
-        idx = np.clip(np.searchsorted(key, tgt), 1, m - 1)
-        cand = np.stack([idx - 1, idx], axis=1)
-        dist = np.abs(key[cand] - tgt[:, None])
-        best = cand[np.arange(m), dist.argmin(axis=1)]
-        d = np.abs(key[best] - tgt)
+        best, d = _nearest_key(key, tgt)
         ok = d <= link_px * gap
-        a, b = np.arange(m)[ok], best[ok]
+        a, b = np.nonzero(ok)[0], best[ok]
         # mutual: b's nearest in the row above is a
-        back_t = key[b] - gap * 1e5
-        bidx = np.clip(np.searchsorted(key, back_t), 1, m - 1)
-        bc = np.stack([bidx - 1, bidx], axis=1)
-        bbest = bc[np.arange(len(b)), np.abs(key[bc] - back_t[:, None]).argmin(axis=1)]
-        mutual = bbest == a
+        mutual = _nearest_key(key, key[b] - gap * 1e5)[0] == a
         src.append(a[mutual])
         dst.append(b[mutual])
     s, d = np.concatenate(src), np.concatenate(dst)
@@ -58,6 +51,29 @@ def link_segments(c: Centres, link_px: float) -> np.ndarray:
     seg = np.empty(m, np.int64)
     seg[order] = comp
     return seg
+
+
+def _nearest_key(key: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Index (T,) of the entry of sorted ``key`` (K,) nearest each target (T,) (the lower of a tie),
+    and the distance (T,)."""
+    hi = np.clip(np.searchsorted(key, target), 1, len(key) - 1)
+    d_lo, d_hi = np.abs(key[hi - 1] - target), np.abs(key[hi] - target)
+    upper = d_hi < d_lo
+    return np.where(upper, hi, hi - 1), np.where(upper, d_hi, d_lo)
+
+
+def row_order(c: Centres) -> np.ndarray:
+    """``np.lexsort((c.u, c.v))``: the centres (M,) by row, then column. One stable sort of a combined
+    key (detection yields them nearly in that order already); a lexsort only when the key ties."""
+    key = c.v.astype(np.float64) * 1e5 + c.u
+    order = np.argsort(key, kind="stable")
+    a, b = order[:-1], order[1:]
+    tie = key[a] == key[b]
+    # a key tie of two centres that differ (closer than the key resolves) needs the real lexsort; both
+    # sorts keep equal centres (detection repeats a few) in their given order
+    if ((c.u[a[tie]] != c.u[b[tie]]) | (c.v[a[tie]] != c.v[b[tie]])).any():
+        return np.lexsort((c.u, c.v))
+    return order
 
 
 def split_at_changes(c: Centres, seg: np.ndarray, window: int = 8, ratio: float = 1.8,
@@ -81,19 +97,21 @@ def split_at_changes(c: Centres, seg: np.ndarray, window: int = 8, ratio: float 
         lc = np.where(valid, logc[idx], 0.0)
         u, v = np.where(valid, c.u[idx], 0.0), np.where(valid, c.v[idx].astype(np.float64), 0.0)
         cs = _padded_cumsum(lc)
-        i = np.arange(window, idx.shape[1] - window)
-        before = (cs[:, i] - cs[:, i - window]) / window
-        after = (cs[:, i + window] - cs[:, i]) / window
+        k = idx.shape[1] - 2 * window  # windows before (from column j) and after (from j + window) row j
+        before = (cs[:, window:window + k] - cs[:, :k]) / window
+        after = (cs[:, 2 * window:2 * window + k] - cs[:, window:window + k]) / window
         jump = np.abs(after - before)
         # slopes du/dv on each side by least squares over the window
-        sb = _slopes(u, v, i - window, i)
-        sa = _slopes(u, v, i, i + window)
+        sums = [_padded_cumsum(x) for x in (u, v, u * v, v * v)]
+        sb = _slopes(sums, 0, k, window)
+        sa = _slopes(sums, window, k, window)
         kink = np.abs(sa - sb)
+        i = np.arange(window, window + k)
         score = np.maximum(jump / np.log(ratio), kink / slope_change)
         inside = i[None, :] < (n_rows - window)[:, None]
         for row in np.nonzero(((score >= 1.0) & inside).any(axis=1))[0]:
-            ks = _greedy_cuts(score[row, :n_rows[row] - 2 * window], window)
-            cuts[int(runs[row])] = [window + k for k in ks]
+            at = _greedy_cuts(score[row, :n_rows[row] - 2 * window], window)
+            cuts[int(runs[row])] = [window + j for j in at]
     for run in sorted(cuts):  # new ids in segment order, as one segment at a time would hand them out
         idx = order[starts[run]:starts[run + 1]]
         for cpos in cuts[run]:
@@ -118,11 +136,12 @@ def _greedy_cuts(score: np.ndarray, window: int) -> list[int]:
         j = k + window
 
 
-def _slopes(u: np.ndarray, v: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Least-squares slopes du/dv (R, K) over columns [lo, hi) (K,) of the rows of u, v (R, L)."""
-    cu, cv = _padded_cumsum(u), _padded_cumsum(v)
-    cuv, cvv = _padded_cumsum(u * v), _padded_cumsum(v * v)
-    n = (hi - lo).astype(np.float64)
+def _slopes(sums: list[np.ndarray], start: int, k: int, window: int) -> np.ndarray:
+    """Least-squares slopes du/dv (R, k) over the windows [start + j, start + j + window), j < k, of
+    rows with running sums ``sums`` = _padded_cumsum of u, v, u v, v v (each (R, L + 1))."""
+    lo, hi = slice(start, start + k), slice(start + window, start + window + k)
+    cu, cv, cuv, cvv = sums
+    n = float(window)
     su, sv = cu[:, hi] - cu[:, lo], cv[:, hi] - cv[:, lo]
     suv, svv = cuv[:, hi] - cuv[:, lo], cvv[:, hi] - cvv[:, lo]
     den = n * svv - sv * sv
@@ -158,7 +177,7 @@ def _padded_cumsum(x: np.ndarray) -> np.ndarray:
 
 def row_neighbours(c: Centres) -> tuple[np.ndarray, np.ndarray]:
     """Index of the left and right neighbour of each centre in its row (-1 at the row's ends)."""
-    order = np.lexsort((c.u, c.v))
+    order = row_order(c)
     left = np.full(len(c), -1, np.int64)
     right = np.full(len(c), -1, np.int64)
     same = c.v[order][1:] == c.v[order][:-1]
