@@ -41,7 +41,7 @@ from .segments import (
     smooth_along_segments,
     split_at_changes,
 )
-from .triangulation import depth_for_labels, intersect
+from .triangulation import depth_for_labels, depth_on, intersect
 
 __all__ = ["Labels", "MatchingParams", "denoise", "label_centres", "link_segments", "smooth_along_segments"]
 GAP_PENALTY_MM = 8.0
@@ -227,9 +227,10 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
     With ``bg_planes`` a segment only joins when its points then lie on those planes; with
     ``avoid_planes`` only when they do not."""
     pairs = _neighbour_pairs(seg, long_seg, left, right)
+    table = _label_table(seg, seg_label)
+    active = None
     for _ in range(40):
-        new = _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, depth_only,
-                    min_share=min_share, gaps=gaps, pairs=pairs)
+        new = _votes(rays, planes, table, pairs, tol_mm, n, depth_only, False, min_share, gaps, active)
         if bg_planes is not None and new:
             on = segments_on_planes(rays, planes, seg, new, bg_planes)
             new = {s: k for s, k in new.items() if s in on}
@@ -239,6 +240,15 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
         if not new:
             break
         seg_label.update(new)
+        grown = np.fromiter(new.keys(), np.int64, len(new))
+        table[grown] = np.fromiter(new.values(), np.int64, len(new))
+        # only segments beside a newly labelled one can vote differently next round; the others would
+        # repeat this round's outcome (no label, or one the plane test refused)
+        newly = np.zeros(len(table), bool)
+        newly[grown] = True
+        active = np.zeros(len(table), bool)
+        for _, _, _, own_seg, nb_seg in pairs:
+            active[own_seg[newly[nb_seg]]] = True
     return _labels_of(seg, seg_label, long_seg)
 
 
@@ -255,51 +265,72 @@ def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
     return float(np.median(np.linalg.norm(a - b, axis=1)))
 
 
-def _neighbour_pairs(seg, mask, left, right) -> list[tuple[np.ndarray, np.ndarray, int]]:
+_Pairs = list[tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray]]
+
+
+def _neighbour_pairs(seg, mask, left, right) -> _Pairs:
     """Per side (left, then right): the centres (K,) in ``mask`` whose row neighbour on that side lies in
-    another segment, that neighbour (K,), and the sign of the label step toward the centre."""
+    another segment, that neighbour (K,), the sign of the label step toward the centre, and the
+    segments (K,) of both."""
     out = []
     for nb, sign in ((left, 1), (right, -1)):
         idx = np.nonzero(mask & (nb >= 0))[0]
-        idx = idx[seg[nb[idx]] != seg[idx]]
-        out.append((idx, nb[idx], sign))
+        own, other = seg[idx], seg[nb[idx]]
+        keep = other != own
+        out.append((idx[keep], nb[idx[keep]], sign, own[keep], other[keep]))
     return out
 
 
-def _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, depth_only=False,
-          relabel=False, min_share=0.6, gaps=(1, 2, 3), pairs=None) -> dict[int, int]:
-    """Labels for unlabelled segments that continue a labelled neighbour's surface (one round). With
-    ``relabel`` the labelled segments in ``long_seg`` are re-voted by their neighbours instead.
-    pairs : _neighbour_pairs(seg, long_seg, left, right), when a caller runs several rounds"""
+def _label_table(seg: np.ndarray, seg_label: dict[int, int]) -> np.ndarray:
+    """Label (S,) of every segment id up to seg.max(), -1 where ``seg_label`` has none."""
     table = np.full(seg.max() + 1, -1, np.int64)
     if seg_label:
         table[np.fromiter(seg_label.keys(), np.int64)] = np.fromiter(seg_label.values(), np.int64)
+    return table
+
+
+def _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, depth_only=False,
+          relabel=False, min_share=0.6, gaps=(1, 2, 3)) -> dict[int, int]:
+    """Labels for unlabelled segments that continue a labelled neighbour's surface (one round). With
+    ``relabel`` the labelled segments in ``long_seg`` are re-voted by their neighbours instead."""
+    return _votes(rays, planes, _label_table(seg, seg_label), _neighbour_pairs(seg, long_seg, left, right),
+                  tol_mm, n, depth_only, relabel, min_share, gaps)
+
+
+def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, min_share, gaps,
+           active: np.ndarray | None = None) -> dict[int, int]:
+    """One round of ``_grow`` on label ``table`` (S,) and neighbour ``pairs``, for the segments flagged in
+    ``active`` (S,) (all when None)."""
     voters, votes = [], []
-    for idx, nbr, sign in pairs if pairs is not None else _neighbour_pairs(seg, long_seg, left, right):
-        own, kn = table[seg[idx]], table[seg[nbr]]
+    for idx, nbr, sign, own_seg, nb_seg in pairs:
+        own, kn = table[own_seg], table[nb_seg]
         take = ((own >= 0) if relabel else (own < 0)) & (kn >= 0)
-        idx, nbr, kn = idx[take], nbr[take], kn[take]
+        if active is not None:
+            take &= active[own_seg]
+        idx, nbr, kn, voter = idx[take], nbr[take], kn[take], own_seg[take]
         if len(idx) == 0:
             continue
-        pn = intersect(rays[nbr], planes[kn])
+        if depth_only:
+            zn = depth_on(rays[nbr], planes[kn])
+        else:
+            pn = intersect(rays[nbr], planes[kn])
         best_k = np.full(len(idx), -1)
         best_d = np.full(len(idx), np.inf)
         for gap in gaps:
             k = kn + sign * gap
             okk = (k >= 0) & (k < n)
-            p = intersect(rays[idx], planes[np.clip(k, 0, n - 1)])
             if depth_only:
                 # on a curved body, depth continuity separates a right index (median 3 mm on the simulated
                 # fox, 99 % under 36) from a wrong one (a whole depth step, 35-75 mm) better than 3-D gaps
-                d = np.abs(p[:, 2] - pn[:, 2])
+                d = np.abs(depth_on(rays[idx], planes[np.clip(k, 0, n - 1)]) - zn)
                 # a missing stripe is the rarer event: a wider gap must fit clearly better to win (a
                 # steep flank seen from above makes the right gap of one look discontinuous)
                 d = d + (gap - 1) * GAP_PENALTY_MM
             else:  # on flat backgrounds the 3-D gap per stripe is the sharper test
-                d = np.linalg.norm(p - pn, axis=1) / gap
+                d = np.linalg.norm(intersect(rays[idx], planes[np.clip(k, 0, n - 1)]) - pn, axis=1) / gap
             better = okk & (d < best_d) & (d < tol_mm)
             best_k[better], best_d[better] = k[better], d[better]
-        voters.append(seg[idx])
+        voters.append(voter)
         votes.append(best_k)
     if not voters:
         return {}
@@ -329,13 +360,14 @@ def _refine(c, rays, planes, seg, seg_label, mask, left, right, tol_mm, n, round
     """Re-vote each labelled segment in ``mask`` by its neighbours; a clear majority for another label
     (a growth step that took the wrong gap) replaces it. Updates ``seg_label`` in place."""
     pairs = _neighbour_pairs(seg, mask, left, right)
+    table = _label_table(seg, seg_label)
     for _ in range(rounds):
-        votes = _grow(c, rays, planes, seg, seg_label, mask, left, right, tol_mm, n, depth_only=True,
-                      relabel=True, min_share=0.7, pairs=pairs)
+        votes = _votes(rays, planes, table, pairs, tol_mm, n, True, True, 0.7, (1, 2, 3))
         changed = {s: k for s, k in votes.items() if seg_label.get(s) != k}
         if not changed:
             break
         seg_label.update(changed)
+        table[np.fromiter(changed.keys(), np.int64)] = np.fromiter(changed.values(), np.int64)
 
 
 def _enforce_row_order(c: Centres, labels: np.ndarray) -> np.ndarray:

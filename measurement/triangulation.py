@@ -45,8 +45,17 @@ def intersect(rays: np.ndarray, planes: np.ndarray) -> np.ndarray:
     return rays * s[:, None]
 
 
+def depth_on(rays: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """Depth z (M,) mm of ``intersect(rays, planes)``, without the other two coordinates."""
+    denom = np.einsum("ij,ij->i", rays, planes[:, :3])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = planes[:, 3] / denom
+    s[np.abs(denom) < 1e-9] = np.nan
+    return rays[:, 2] * s
+
+
 def depth_for_labels(rays: np.ndarray, planes: np.ndarray) -> np.ndarray:
     """Depth z (M, K) mm of each ray (M, 3) on every plane (K, 4); NaN/negative where behind the camera."""
-    denom = rays @ planes[:, :3].T
+    z = rays @ planes[:, :3].T
     with np.errstate(divide="ignore", invalid="ignore"):
-        return planes[None, :, 3] / denom
+        return np.divide(planes[None, :, 3], z, out=z)  # in place: one (M, K) array, not two
