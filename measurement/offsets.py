@@ -44,7 +44,7 @@ def projector_elevation(points: np.ndarray, planes: np.ndarray) -> np.ndarray:
 
 
 def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, bins: float = 0.002,
-                      free: float = 0.01, pattern_edge: float = 0.02) -> int | None:
+                      free: float = 0.0075, pattern_edge: float = 0.02) -> int | None:
     """Absolute offset of a cluster with relative labels ``r[idx]``, from the projector's point of view.
 
     A background point lit by stripe k at projector elevation e proves that nothing stood in front of it
