@@ -27,6 +27,11 @@ class DetectionParams:
     peak_px       : half-width of the non-maximum suppression along the row
     min_contrast  : a centre stands at least this many gray levels above its local background
     sigma_x, sigma_y : smoothing across and along the (near-vertical) stripes before peak finding
+    min_flank, flank_ratio : a reliable centre falls on each side, within half the background window, by at
+                    least max(min_flank, flank_ratio * contrast) gray levels (a stripe is a peak; the
+                    rising side of an albedo or shadow edge is not)
+    max_width     : a reliable centre is at most this many times the image's median stripe width (a stripe
+                    widened by a grazing surface has its centroid off the plane's image)
     """
 
     background_px: int = 17
@@ -34,6 +39,9 @@ class DetectionParams:
     min_contrast: float = 8.0
     sigma_x: float = 1.0
     sigma_y: float = 1.5
+    min_flank: float = 4.0
+    flank_ratio: float = 0.5
+    max_width: float = 1.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,18 +52,22 @@ class Centres:
     v       : (M,) int32 row, pixels
     contrast: (M,) float32 peak height above the local background, gray levels
     width   : (M,) float32 width of the stripe at half its height, pixels
+    flank   : (M,) float32 peak height above the higher of the two side minima (its weaker flank), gray
+              levels; None when not measured (every centre then counts as reliable)
     """
 
     u: np.ndarray
     v: np.ndarray
     contrast: np.ndarray
     width: np.ndarray
+    flank: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.u)
 
     def take(self, mask: np.ndarray) -> Centres:
-        return Centres(self.u[mask], self.v[mask], self.contrast[mask], self.width[mask])
+        flank = None if self.flank is None else self.flank[mask]
+        return Centres(self.u[mask], self.v[mask], self.contrast[mask], self.width[mask], flank)
 
 
 def to_gray8(image: np.ndarray) -> np.ndarray:
@@ -107,32 +119,52 @@ def detect_centres(image: np.ndarray, params: DetectionParams = DetectionParams(
     cand = cv2.bitwise_and(cand, cv2.compare(s, left, cv2.CMP_GT))
     pts = cv2.findNonZero(cand)
     if pts is None:
-        return Centres(np.zeros(0), np.zeros(0, np.int32), np.zeros(0, np.float32), np.zeros(0, np.float32))
+        return Centres(np.zeros(0), np.zeros(0, np.int32), np.zeros(0, np.float32), np.zeros(0, np.float32),
+                       np.zeros(0, np.float32))
     pts = pts.reshape(-1, 2)
     x, y = pts[:, 0].astype(np.int64), pts[:, 1].astype(np.int64)
-    u, width = _refine(s, bg, x, y, _scaled(params.background_px, w) // 2 + 1)
-    return Centres(u, y.astype(np.int32), contrast[y, x].astype(np.float32), width)
+    u, width, flank = _refine(s, bg, x, y, _scaled(params.background_px, w) // 2 + 1)
+    return Centres(u, y.astype(np.int32), contrast[y, x].astype(np.float32), width, flank)
+
+
+def reliable(c: Centres, params: DetectionParams = DetectionParams()) -> np.ndarray:
+    """(M,) bool: centres whose position can be trusted for triangulation.
+
+    Not for dropping centres before labelling (every centre helps link and label its stripe) but for
+    keeping unreliable ones out of the point cloud. On the simulator's 3072 px fur side views most animal
+    points more than 2 mm off the surface came from centres 1.5-5 px off the true crossing: one-sided
+    peaks on a brightness ramp (a dark, barely lit stretch of fur beside a brighter patch or the outline)
+    and stripes widened at a grazing silhouette; leaving these out takes the points beyond 2 mm from
+    4.4 % to 2.6 % and from 6.9 % to 4.2 % (seed 4, 40 and 50 stripes).
+    """
+    ok = np.ones(len(c), bool)
+    if c.flank is not None:
+        ok &= c.flank >= np.maximum(params.min_flank, params.flank_ratio * c.contrast)
+    if len(c) and params.max_width > 0:
+        ok &= c.width <= params.max_width * float(np.median(c.width))
+    return ok
 
 
 def _refine(s: np.ndarray, bg: np.ndarray, x: np.ndarray, y: np.ndarray, half: int
-            ) -> tuple[np.ndarray, np.ndarray]:
-    """Centroid of the part of each peak above half its height, within +-half pixels; and that part's width."""
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centroid of the part of each peak above half its height, within +-half pixels; that part's width;
+    and the peak's height above the higher of its two side minima (within half - 1 pixels each side)."""
     h, w = s.shape
     offs = np.arange(-half, half + 1)
     cols = np.clip(x[:, None] + offs[None, :], 0, w - 1)
-    vals = s[y[:, None], cols].astype(np.float32)
+    raw = s.ravel()[(y * w)[:, None] + cols]  # flat indices: a third faster than s[y[:, None], cols]
+    # each side window holds the peak itself, so the difference cannot wrap around in uint8
+    flank = (raw[:, half] - np.maximum(raw[:, 1:half + 1].min(axis=1), raw[:, half:2 * half].min(axis=1)))
+    vals = raw.astype(np.float32)
     base = bg[y, x].astype(np.float32)[:, None]
-    top = vals[:, half:half + 1]
-    level = base + 0.5 * (top - base)
+    level = base + 0.5 * (vals[:, half:half + 1] - base)
     above = vals > level
     # keep only the contiguous run through the peak (a neighbouring stripe must not pull the centroid)
-    left_break = np.cumsum(~above[:, :half + 1][:, ::-1], axis=1)[:, ::-1] > 0
-    right_break = np.cumsum(~above[:, half:], axis=1) > 0
-    run = np.concatenate([~left_break[:, :-1], np.ones((len(x), 1), bool), ~right_break[:, 1:]], axis=1)
+    run_left = np.logical_and.accumulate(above[:, half::-1], axis=1)[:, :0:-1]
+    run = np.concatenate([run_left, np.logical_and.accumulate(above[:, half:], axis=1)], axis=1)
     wts = np.where(run, vals - level, 0.0)
-    m0 = wts.sum(axis=1)
-    u = x + (wts * offs).sum(axis=1) / np.maximum(m0, 1e-6)
-    return u.astype(np.float64), run.sum(axis=1).astype(np.float32)
+    u = x + (wts * offs).sum(axis=1) / np.maximum(wts.sum(axis=1), 1e-6)
+    return u.astype(np.float64), run.sum(axis=1).astype(np.float32), flank.astype(np.float32)
 
 
 def check_image(image: np.ndarray, expected: tuple[int, int] | None, name: str = "image") -> None:

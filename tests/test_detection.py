@@ -4,7 +4,13 @@ the simulator's exact crossings, and refusals of unusable images."""
 import numpy as np
 import pytest
 
-from measurement.detection import algorithm2_boundaries, algorithm2_centres, check_image, detect_centres
+from measurement.detection import (
+    algorithm2_boundaries,
+    algorithm2_centres,
+    check_image,
+    detect_centres,
+    reliable,
+)
 from measurement.errors import ImageError, StripeDetectionError
 from measurement.images import read_image
 from measurement.paper import boundaries_literal
@@ -57,6 +63,43 @@ def test_centres_lie_on_the_exact_plane_crossings(small_capture):
     alg2 = algorithm2_centres(img)
     assert wall_rms(c.u, c.v) < 0.3
     assert wall_rms(c.u, c.v) < wall_rms(alg2.u, alg2.v)
+
+
+def _row_image(profile: np.ndarray, rows: int = 20) -> np.ndarray:
+    """Rows of a full-width (3072 px) frame, the scale the detector's pixel parameters are given at."""
+    return np.tile(np.clip(profile, 0, 255).astype(np.uint8), (rows, 1))
+
+
+def test_a_symmetric_stripe_is_reliable_and_the_rising_side_of_a_brightness_step_is_not():
+    x = np.arange(3072, dtype=float)
+    stripe = 20 + 80 * np.exp(-0.5 * ((x - 60) / 2.0) ** 2)
+    # a dim stripe on dark fur right beside a brighter patch: its peak barely stands above the patch side
+    step = 10 + 40 / (1 + np.exp(-(x - 146) / 3.0)) + 12 * np.exp(-0.5 * ((x - 140) / 2.0) ** 2)
+    c = detect_centres(_row_image(np.maximum(stripe, step)))
+    ok = reliable(c)
+    near_stripe = np.abs(c.u - 60) < 1
+    on_step = np.abs(c.u - 60) > 10
+    assert near_stripe.any() and ok[near_stripe].all()
+    assert on_step.any() and not ok[on_step].any()
+
+
+def test_a_stripe_widened_at_a_grazing_surface_is_unreliable():
+    x = np.arange(3072, dtype=float)
+    narrow = sum(100 * np.exp(-0.5 * ((x - m) / 2.0) ** 2) for m in (40, 80, 120, 160, 200))
+    wide = 100 * np.exp(-0.5 * ((x - 300) / 4.0) ** 2)
+    c = detect_centres(_row_image(10 + narrow + wide))
+    ok = reliable(c)
+    widened = np.abs(c.u - 300) < 2
+    assert widened.any() and ok[~widened].all() and not ok[widened].any()
+
+
+def test_unreliable_centres_are_mostly_off_the_true_crossings(small_capture):
+    img, truth = _side(small_capture)
+    c = detect_centres(img)
+    ok = reliable(c)
+    label, _ = match_crossings(np.column_stack([c.u, c.v]), truth, max_px=1.0)
+    assert ok.mean() > 0.9  # most centres are kept
+    assert np.mean(label[~ok] < 0) > 2 * np.mean(label[ok] < 0)  # the rejected ones are far more often off
 
 
 def test_ambient_image_of_another_size_is_refused(small_capture):
