@@ -49,20 +49,35 @@ def on_plane_fractions(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarr
 
 
 def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray, tol_mm: float,
-                    depth: np.ndarray | None = None, chunk: int = 1024) -> np.ndarray:
+                    depth: np.ndarray | None = None, chunk: int = 4096) -> np.ndarray:
     """(m, N) True where ray i's point on light plane k lies within ``tol_mm`` of a background plane.
-    depth : (m, N) depth_for_labels(rays, planes) when already known"""
+    depth : (m, N) depth_for_labels(rays, planes) when already known
+
+    The distance is |(ray z) . n - d|. It is screened as |z (ray . n) - d| (no (m, N, 3) points), which
+    differs only by rounding; where that lies within a hair of ``tol_mm`` the points are formed after
+    all, so the answer is the one the exact formula gives."""
     z_all = depth_for_labels(rays, planes) if depth is None else depth
+    normals = np.ascontiguousarray(bg_planes[:, :3].T)  # (3, P)
     out = np.empty((len(rays), len(planes)), bool)
-    for a in range(0, len(rays), chunk):  # in chunks that stay in cache: (m, N, 3) points are large
+    for a in range(0, len(rays), chunk):
         r, z = rays[a:a + chunk], z_all[a:a + chunk]
-        on_bg = r[:, None, :] * z[:, :, None] @ bg_planes[:, :3].T  # (m, N, P)
-        # fmin skips NaN (a ray parallel to a plane) like the other plane's distance would
-        d = np.abs(on_bg[:, :, 0] - bg_planes[0, 3])
-        for p in range(1, len(bg_planes)):
-            d = np.fmin(d, np.abs(on_bg[:, :, p] - bg_planes[p, 3]))
-        out[a:a + chunk] = d < tol_mm
+        along = r @ normals  # (m, P)
+        d = np.abs(z * along[:, :1] - bg_planes[0, 3])
+        for p in range(1, len(bg_planes)):  # fmin skips NaN (ray parallel to a plane) like the exact min
+            d = np.fmin(d, np.abs(z * along[:, p:p + 1] - bg_planes[p, 3]))
+        near = d < tol_mm
+        unsure = ~(np.abs(d - tol_mm) > 1e-6) | ~(np.abs(z) < 1e5)  # rounding could decide, or NaN/far
+        i, k = np.nonzero(unsure)
+        if len(i):
+            near[i, k] = _near_exact(r[i] * z[i, k][:, None], normals, bg_planes[:, 3], tol_mm)
+        out[a:a + chunk] = near
     return out
+
+
+def _near_exact(points: np.ndarray, normals: np.ndarray, d: np.ndarray, tol_mm: float) -> np.ndarray:
+    """(K,) True where points (K, 3) lie within ``tol_mm`` of a plane (normals (3, P), offsets (P,))."""
+    dist = np.abs(points @ normals - d)
+    return np.nan_to_num(dist, nan=np.inf).min(axis=1) < tol_mm
 
 
 def _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm, depth=None):
