@@ -11,24 +11,49 @@ import numpy as np
 
 @dataclass(frozen=True)
 class BodyParams:
-    """min_group: stripe groups with fewer animal points are ignored; trim: robust extreme quantile;
-    background_mm: points this close to a floor/wall plane are background; cluster_mm: neighbour radius."""
+    """Knobs of isolation and measurement.
+
+    min_group     : stripe groups with fewer animal points are ignored
+    trim          : robust extreme quantile
+    background_mm : points within this distance of a floor/wall plane estimate the planes' noise; the
+                    background margin never exceeds it
+    background_sigmas, min_background_mm : points within max(min_background_mm, background_sigmas x that
+                    noise) of a plane are background (a foot standing on the floor keeps all but its
+                    lowest few mm; a fixed 12 mm cut the lowest 12 mm of every leg)
+    cluster_mm    : neighbour radius (voxel size) of the connectivity that picks the animal
+    """
 
     min_group: int = 10
     trim: float = 0.01
     background_mm: float = 12.0
+    background_sigmas: float = 10.0
+    min_background_mm: float = 3.0
     cluster_mm: float = 25.0
 
 
+def background_margin(distance: np.ndarray, params: BodyParams = BodyParams()) -> float:
+    """Distance (mm) from the background planes under which a point is background: ``background_sigmas``
+    robust standard deviations of the points near the planes (mostly floor and wall: 0.2-0.35 mm on
+    the simulator), clipped to [min_background_mm, background_mm].
+
+    distance : (N,) float64 distance of each point to its nearest background plane, mm
+    """
+    near = distance[distance <= params.background_mm]
+    if len(near) < 100:
+        return params.background_mm
+    sigma = 1.4826 * float(np.median(near))  # |d| of a zero-mean normal: median = 0.6745 sigma
+    return float(np.clip(params.background_sigmas * sigma, params.min_background_mm, params.background_mm))
+
+
 def isolate(points: np.ndarray, background: np.ndarray | None, params: BodyParams = BodyParams()) -> np.ndarray:
-    """(N,) bool mask of the animal: off the background planes, then the largest cluster of points
-    connected through occupied voxels of ``cluster_mm`` (26-neighbourhood)."""
+    """(N,) bool mask of the animal: off the background planes (by ``background_margin``), then the
+    largest cluster of points connected through occupied voxels of ``cluster_mm`` (26-neighbourhood)."""
     from scipy import ndimage
 
     keep = np.isfinite(points).all(axis=1)
     if background is not None and len(background):
         d = np.abs(points @ background[:, :3].T - background[:, 3]).min(axis=1)
-        keep &= d > params.background_mm
+        keep &= d > background_margin(d[keep], params)
     idx = np.nonzero(keep)[0]
     if len(idx) < params.min_group:
         return np.zeros(len(points), bool)

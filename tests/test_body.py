@@ -50,3 +50,16 @@ def test_isolation_drops_the_floor_and_stray_clusters():
     allp = np.vstack([pts, floor, stray])
     keep = isolate(allp, np.array([[0.0, 1.0, 0.0, -150.0]]))
     assert keep[: len(pts)].all() and not keep[len(pts):].any()
+
+
+def test_isolation_keeps_a_foot_down_to_a_few_noise_widths_above_the_floor():
+    pts, _, _ = _barrel()
+    leg = np.column_stack([np.full(200, 200.0), np.linspace(-100.0, -150.0, 200), np.full(200, 1200.0)])
+    rng = np.random.default_rng(1)
+    floor = np.column_stack([rng.uniform(-300, 700, 3000), -150.0 + rng.normal(0, 0.3, 3000),
+                             rng.uniform(1000, 1400, 3000)])
+    keep = isolate(np.vstack([pts, leg, floor]), np.array([[0.0, 1.0, 0.0, -150.0]]))
+    height = leg[:, 1] + 150.0
+    leg_kept = keep[len(pts): len(pts) + len(leg)]
+    assert keep[: len(pts)].all() and not keep[len(pts) + len(leg):].any()
+    assert leg_kept[height > 4.0].all() and not leg_kept[height < 2.5].any()
