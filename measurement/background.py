@@ -152,11 +152,10 @@ def split_foreground(c, seg, labels, on_bg, link, min_rows):
     if len(fg_idx):
         long_seg[fg_idx] = np.bincount(fseg)[fseg] >= min_rows
     kept = np.nonzero(~fg & (labels >= 0))[0]
+    # labels are whole-segment here (a segment table masked by segment length): any centre gives its label
     sids, first = np.unique(new[kept], return_index=True)
-    _, last = np.unique(new[kept][::-1], return_index=True)
     by_first = np.argsort(first)
-    seg_label = dict(zip(sids[by_first].tolist(), labels[kept][len(kept) - 1 - last[by_first]].tolist(),
-                         strict=True))
+    seg_label = dict(zip(sids[by_first].tolist(), labels[kept[first[by_first]]].tolist(), strict=True))
     return new, long_seg, seg_label
 
 
