@@ -212,7 +212,7 @@ def smooth_along_segments(c: Centres, segment: np.ndarray, labels: np.ndarray, h
         padded, _ = _gather(order, first, n_rows, np.arange(-half, width + half))
         xp = c.u[padded]  # edge-padded columns, (R, width + 2 half)
         x = xp[:, half:half + width]
-        med = np.sort(np.lib.stride_tricks.sliding_window_view(xp, win, axis=1), axis=2)[:, :, half]
+        med = _window_median(xp, win, width)
         bad = np.abs(x - med) > outlier_px
         good = np.where(bad, med, x)
         at = np.clip(np.arange(-half, width + half)[None, :], 0, n_rows[:, None] - 1)
@@ -220,3 +220,16 @@ def smooth_along_segments(c: Centres, segment: np.ndarray, labels: np.ndarray, h
         u[ids[valid]] = ((cs[:, win:win + width] - cs[:, :width]) / win)[valid]
         keep[ids[valid & bad]] = False
     return u, keep
+
+
+def _window_median(xp: np.ndarray, win: int, width: int) -> np.ndarray:
+    """Median (R, width) of each run of ``win`` (odd) columns of xp (R, width + win - 1)."""
+    cols = [xp[:, j:j + width] for j in range(win)]
+    if win != 5:
+        return np.sort(np.stack(cols, axis=2), axis=2)[:, :, win // 2]
+    # five values: drop the smallest and the largest of the first four, take the median of three (a
+    # selection network: the result is one of the inputs, exactly as a sort would pick it)
+    a, b, c, d, e = cols
+    lo = np.maximum(np.minimum(a, b), np.minimum(c, d))
+    hi = np.minimum(np.maximum(a, b), np.maximum(c, d))
+    return np.maximum(np.minimum(lo, hi), np.minimum(np.maximum(lo, hi), e))
