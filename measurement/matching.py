@@ -273,11 +273,15 @@ def _neighbour_pairs(seg, mask, left, right) -> _Pairs:
     another segment, that neighbour (K,), the sign of the label step toward the centre, and the
     segments (K,) of both."""
     out = []
+    members = np.flatnonzero(mask)
+    own_all = seg[members]
     for nb, sign in ((left, 1), (right, -1)):
-        idx = np.nonzero(mask & (nb >= 0))[0]
-        own, other = seg[idx], seg[nb[idx]]
+        nbr = nb[members]
+        has = nbr >= 0
+        idx, nbr, own = members[has], nbr[has], own_all[has]
+        other = seg[nbr]
         keep = other != own
-        out.append((idx[keep], nb[idx[keep]], sign, own[keep], other[keep]))
+        out.append((idx[keep], nbr[keep], sign, own[keep], other[keep]))
     return out
 
 
