@@ -75,7 +75,7 @@ def main_row_labels(c: Centres, n: int) -> np.ndarray:
     idx = np.nonzero(full)[0]
     if len(idx) == 0:
         return labels
-    order = idx[np.lexsort((c.u[idx], c.v[idx]))]
+    order = idx[row_order(c.take(idx))]
     grid = c.u[order].reshape(-1, n)
     gaps = np.diff(grid, axis=1)
     # spacing changes slowly along a row on a smooth surface: no gap may jump against its neighbours
@@ -92,6 +92,13 @@ def _segment_vote(seg: np.ndarray, labels: np.ndarray, min_share: float = 0.8) -
     has = labels >= 0
     if not has.any():
         return {}
+    n_seg, n_lab = int(seg.max()) + 1, int(labels.max()) + 1
+    if n_seg * n_lab <= 4_000_000:  # a (segment, label) count table is small: no sort needed
+        table = np.bincount(seg[has] * n_lab + labels[has], minlength=n_seg * n_lab).reshape(n_seg, n_lab)
+        best = table.argmax(axis=1)  # the lowest label of a tie
+        top, total = table[np.arange(n_seg), best], table.sum(axis=1)
+        agree = np.nonzero((total > 0) & (top >= min_share * total))[0]
+        return dict(zip(agree.tolist(), best[agree].tolist(), strict=True))
     pairs = seg[has] * 100000 + labels[has]
     uniq, cnt = np.unique(pairs, return_counts=True)
     segs, labs = uniq // 100000, uniq % 100000
