@@ -7,6 +7,8 @@ midpoint; ``measurement.paper`` keeps it as the measured baseline. Here the same
 brighter than its surroundings by a margin) is computed with a local minimum filter as the background
 (one global threshold cannot serve dark fur and a bright wall at once) and the centre is the
 intensity-weighted centroid of the run's upper half, which the numbers favour (docs/benchmarks.md).
+Weak peaks count when they continue a strong stripe (hysteresis), so a stripe's faint grazing ends are
+kept; ``reliable`` flags centres whose position should not reach the point cloud.
 """
 
 from __future__ import annotations
@@ -26,6 +28,10 @@ class DetectionParams:
     background_px : width of the minimum filter giving the local background (about half a stripe period)
     peak_px       : half-width of the non-maximum suppression along the row
     min_contrast  : a centre stands at least this many gray levels above its local background
+    weak_contrast, link_px : hysteresis: a weaker peak (above weak_contrast, two-sided: see min_flank) is a
+                    centre too when a chain of such peaks, each within link_px columns of one in the next
+                    or next-but-one row, reaches a centre above min_contrast. Recovers the faint ends of a
+                    stripe where it grazes the back, a foot or the flank seen from above; 0 turns it off
     sigma_x, sigma_y : smoothing across and along the (near-vertical) stripes before peak finding
     min_flank, flank_ratio : a reliable centre falls on each side, within half the background window, by at
                     least max(min_flank, flank_ratio * contrast) gray levels (a stripe is a peak; the
@@ -37,6 +43,8 @@ class DetectionParams:
     background_px: int = 17
     peak_px: int = 4
     min_contrast: float = 8.0
+    weak_contrast: float = 4.0
+    link_px: float = 2.0
     sigma_x: float = 1.0
     sigma_y: float = 1.5
     min_flank: float = 4.0
@@ -110,8 +118,8 @@ def detect_centres(image: np.ndarray, params: DetectionParams = DetectionParams(
     contrast = cv2.subtract(s, bg)
     peak = cv2.dilate(s, np.ones((1, 2 * _scaled(params.peak_px, w) + 1), np.uint8))
     cand = cv2.compare(s, peak, cv2.CMP_EQ)
-    strong = cv2.compare(contrast, np.full_like(contrast, int(params.min_contrast)), cv2.CMP_GT)
-    cand = cv2.bitwise_and(cand, strong)
+    low = params.weak_contrast if params.weak_contrast > 0 else params.min_contrast
+    cand = cv2.bitwise_and(cand, cv2.compare(contrast, np.full_like(contrast, int(low)), cv2.CMP_GT))
     # on a flat-topped peak keep only its first pixel: strictly brighter than the left neighbour
     left = np.empty_like(s)
     left[:, 1:] = s[:, :-1]
@@ -124,7 +132,41 @@ def detect_centres(image: np.ndarray, params: DetectionParams = DetectionParams(
     pts = pts.reshape(-1, 2)
     x, y = pts[:, 0].astype(np.int64), pts[:, 1].astype(np.int64)
     u, width, flank = _refine(s, bg, x, y, _scaled(params.background_px, w) // 2 + 1)
-    return Centres(u, y.astype(np.int32), contrast[y, x].astype(np.float32), width, flank)
+    c = Centres(u, y.astype(np.int32), contrast[y, x].astype(np.float32), width, flank)
+    if params.weak_contrast <= 0 or params.weak_contrast >= params.min_contrast:
+        return c
+    strong = c.contrast > params.min_contrast
+    weak = ~strong & (flank >= params.flank_ratio * c.contrast)
+    return c.take(strong | _linked(x, y, w, strong, weak, params.link_px * w / 3072.0))
+
+
+def _linked(x: np.ndarray, y: np.ndarray, w: int, strong: np.ndarray, weak: np.ndarray, link: float
+            ) -> np.ndarray:
+    """(M,) bool: weak candidates joined to a strong one through weak ones, row to row (one or two rows
+    apart, within ``link`` columns). x, y : (M,) int64 pixels in raster order (as cv2.findNonZero gives)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    m = len(x)
+    wi = np.nonzero(weak)[0]
+    if len(wi) == 0:
+        return weak
+    key = y * w + x  # ascending
+    r = int(np.floor(link))
+    src, dst = [], []
+    for gap in (-2, -1, 1, 2):
+        lo = np.searchsorted(key, key[wi] + gap * w - r)
+        hi = np.searchsorted(key, key[wi] + gap * w + r, side="right")
+        for off in range(2 * r + 1):  # candidates are at least two pixels apart: a handful per window
+            j = np.minimum(lo + off, m - 1)
+            ok = (lo + off < hi) & (y[j] == y[wi] + gap) & (strong[j] | weak[j])
+            src.append(wi[ok])
+            dst.append(j[ok])
+    a, b = np.concatenate(src), np.concatenate(dst)
+    _, comp = connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m)), directed=False)
+    reached = np.zeros(comp.max() + 1, bool)
+    reached[comp[strong]] = True
+    return weak & reached[comp]
 
 
 def reliable(c: Centres, params: DetectionParams = DetectionParams()) -> np.ndarray:
@@ -151,20 +193,26 @@ def _refine(s: np.ndarray, bg: np.ndarray, x: np.ndarray, y: np.ndarray, half: i
     and the peak's height above the higher of its two side minima (within half - 1 pixels each side)."""
     h, w = s.shape
     offs = np.arange(-half, half + 1)
-    cols = np.clip(x[:, None] + offs[None, :], 0, w - 1)
-    raw = s.ravel()[(y * w)[:, None] + cols]  # flat indices: a third faster than s[y[:, None], cols]
+    cols = x[:, None] + offs[None, :]
+    edge = (x < half) | (x >= w - half)
+    cols[edge] = np.clip(cols[edge], 0, w - 1)
+    raw = s.ravel()[(y * w)[:, None] + cols]
     # each side window holds the peak itself, so the difference cannot wrap around in uint8
     flank = (raw[:, half] - np.maximum(raw[:, 1:half + 1].min(axis=1), raw[:, half:2 * half].min(axis=1)))
     vals = raw.astype(np.float32)
     base = bg[y, x].astype(np.float32)[:, None]
     level = base + 0.5 * (vals[:, half:half + 1] - base)
     above = vals > level
-    # keep only the contiguous run through the peak (a neighbouring stripe must not pull the centroid)
-    run_left = np.logical_and.accumulate(above[:, half::-1], axis=1)[:, :0:-1]
-    run = np.concatenate([run_left, np.logical_and.accumulate(above[:, half:], axis=1)], axis=1)
-    wts = np.where(run, vals - level, 0.0)
-    u = x + (wts * offs).sum(axis=1) / np.maximum(wts.sum(axis=1), 1e-6)
-    return u.astype(np.float64), run.sum(axis=1).astype(np.float32), flank.astype(np.float32)
+    # keep only the contiguous run through the peak (a neighbouring stripe must not pull the centroid):
+    # the first pixel below the level on each side (argmin of a bool row; 0 means none, the peak is above)
+    right = above[:, half:].argmin(axis=1)
+    left = above[:, half::-1].argmin(axis=1)
+    right[right == 0] = half + 1
+    left[left == 0] = half + 1
+    run = (offs >= 1 - left[:, None]) & (offs <= right[:, None] - 1)
+    wts = (vals - level) * run
+    u = x + (wts @ offs.astype(np.float32)) / np.maximum(wts.sum(axis=1), 1e-6)
+    return u.astype(np.float64), (left + right - 1).astype(np.float32), flank.astype(np.float32)
 
 
 def check_image(image: np.ndarray, expected: tuple[int, int] | None, name: str = "image") -> None:
