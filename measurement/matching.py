@@ -314,10 +314,11 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
     ``active`` (S,) (all when None)."""
     voters, votes = [], []
     for idx, nbr, sign, own_seg, nb_seg in pairs:
+        if active is not None:  # the few pairs of active segments first, in their order
+            at = np.flatnonzero(active[own_seg])
+            idx, nbr, own_seg, nb_seg = idx[at], nbr[at], own_seg[at], nb_seg[at]
         own, kn = table[own_seg], table[nb_seg]
         take = ((own >= 0) if relabel else (own < 0)) & (kn >= 0)
-        if active is not None:
-            take &= active[own_seg]
         idx, nbr, kn, voter = idx[take], nbr[take], kn[take], own_seg[take]
         if len(idx) == 0:
             continue
