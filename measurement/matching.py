@@ -202,7 +202,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         rel = np.full(seg.max() + 1, 0, np.int64)
         for sid, k in trial.items():
             rel[sid] = k - mid
-        off = occlusion_offset(rays, planes, cl, rel[seg], idx, n, projector_right(planes))
+        off = occlusion_offset(rays, planes, cl, rel[seg], idx, n, projector_right(planes), beside_placed=bool(out))
         if _TRACE is not None:
             _TRACE.append((idx, rel[seg[idx]], off))
         if off is None:
@@ -215,6 +215,10 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         for sid in members:
             if 0 <= rel[sid] + off < n:
                 out[int(sid)] = int(rel[sid] + off)
+        # a projector ray lights one surface only: the cells of a labelled piece are as good as lit
+        # background for the pieces after it (a tail must not slide into the body's own shadow)
+        placed = idx[inside]
+        cl[placed] = lab[inside]
     return out
 
 

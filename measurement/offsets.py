@@ -44,7 +44,7 @@ def projector_elevation(points: np.ndarray, planes: np.ndarray) -> np.ndarray:
 
 
 def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, bins: float = 0.002,
-                      free: float = 0.0075, pattern_edge: float = 0.02) -> int | None:
+                      free: float = 0.0075, pattern_edge: float = 0.02, beside_placed: bool = False) -> int | None:
     """Absolute offset of a cluster with relative labels ``r[idx]``, from the projector's point of view.
 
     A background point lit by stripe k at projector elevation e proves that nothing stood in front of it
@@ -54,6 +54,11 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
     do not, so the right offset is the conflict-free one nearest the conflicts: the lowest with the
     projector right of the camera, the highest with it on the left. The result never puts more than
     ``pattern_edge`` of the piece beyond the first or last stripe.
+
+    With ``beside_placed`` (``cl`` also holds the cells of pieces already placed, which no other piece
+    may share) a curve that rises on both sides of its minimum is read at the minimum. Not for the
+    first piece: there the conflict residue of stray centres at the outline often sits on the right
+    offset and makes the next one up the minimum.
     """
     bg = np.nonzero(cl >= 0)[0]
     if len(bg) < 100:
@@ -80,6 +85,10 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
     if not conflicts:
         return None
     _log.debug("occlusion conflicts %s", sorted(conflicts.items()))
+    if beside_placed:
+        sharp = _sharp_minimum(conflicts, beyond)
+        if sharp is not None:
+            return sharp
     offs = sorted(conflicts)
     vals = np.array([conflicts[o] for o in offs])
     if not projector_right:  # mirror, so the conflicts always rise toward lower offsets
@@ -114,3 +123,21 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
         best += 1
     return int(best)
 
+
+
+def _sharp_minimum(conflicts: dict[int, float], beyond: dict[int, tuple[float, float]]) -> int | None:
+    """The offset at the bottom of a V: conflicts (plus the share pushed past the pattern) rise on both
+    sides within two stripes. A piece whose every neighbouring cell is lit or taken by an already placed
+    piece (a tail beside the body, a leg in front of the wall) shows this shape, and its bottom is the
+    answer; a one-sided curve (a flat conflict-free run toward cells the camera cannot see) is left to
+    the knee."""
+
+    def cost(o: int) -> float:
+        return conflicts.get(o, 1.0) + sum(beyond.get(o, (1.0, 0.0)))
+
+    best = min(conflicts, key=cost)
+    floor = cost(best)
+    need = max(2 * floor, floor + 0.02)
+    rises_low = max(cost(best - 1), cost(best - 2)) >= need
+    rises_high = max(cost(best + 1), cost(best + 2)) >= need
+    return best if rises_low and rises_high else None
