@@ -184,6 +184,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     cl = _labels_of(seg, seg_label, long_seg)
     mid = n // 2
     biggest = 0
+    placed_max = 0  # centres in the largest piece placed so far
     while remaining.sum() >= 50:
         sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)
         seed = int(np.argmax(sizes))
@@ -202,7 +203,8 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         rel = np.full(seg.max() + 1, 0, np.int64)
         for sid, k in trial.items():
             rel[sid] = k - mid
-        off = occlusion_offset(rays, planes, cl, rel[seg], idx, n, projector_right(planes), beside_placed=bool(out))
+        off = occlusion_offset(rays, planes, cl, rel[seg], idx, n, projector_right(planes),
+                               beside_placed=len(idx) < placed_max)
         if _TRACE is not None:
             _TRACE.append((idx, rel[seg[idx]], off))
         if off is None:
@@ -219,6 +221,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         # background for the pieces after it (a tail must not slide into the body's own shadow)
         placed = idx[inside]
         cl[placed] = lab[inside]
+        placed_max = max(placed_max, len(idx))
     return out
 
 

@@ -44,7 +44,7 @@ def projector_elevation(points: np.ndarray, planes: np.ndarray) -> np.ndarray:
 
 
 def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, bins: float = 0.002,
-                      free: float = 0.0075, pattern_edge: float = 0.02, beside_placed: bool = False) -> int | None:
+                      residue: float = 0.5, pattern_edge: float = 0.02, beside_placed: bool = False) -> int | None:
     """Absolute offset of a cluster with relative labels ``r[idx]``, from the projector's point of view.
 
     A background point lit by stripe k at projector elevation e proves that nothing stood in front of it
@@ -52,7 +52,9 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
     bins either side too) count, so the shadow's own edges do not. Offsets that slide the object onto lit
     background conflict; those sliding it toward background the camera cannot see (behind the object)
     do not, so the right offset is the conflict-free one nearest the conflicts: the lowest with the
-    projector right of the camera, the highest with it on the left. The result never puts more than
+    projector right of the camera, the highest with it on the left. "Conflict-free" is measured against
+    the ramp of the curve: stray centres at the outline leave a residue on the right offset, and a
+    residue under ``residue`` of one ramp step is tolerated. The result never puts more than
     ``pattern_edge`` of the piece beyond the first or last stripe.
 
     With ``beside_placed`` (``cl`` also holds the cells of pieces already placed, which no other piece
@@ -60,6 +62,16 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
     first piece: there the conflict residue of stray centres at the outline often sits on the right
     offset and makes the next one up the minimum.
     """
+    curve = conflict_curve(rays, planes, cl, r, idx, n, bins)
+    if curve is None:
+        return None
+    return choose_offset(*curve, projector_right, pattern_edge, beside_placed, residue)
+
+
+def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002
+                   ) -> tuple[dict[int, float], dict[int, tuple[float, float]]] | None:
+    """Per offset: the share of the piece's cells that land on deep-lit cells, and the shares of the
+    piece pushed before the first and past the last stripe; None without enough lit background."""
     bg = np.nonzero(cl >= 0)[0]
     if len(bg) < 100:
         return None
@@ -85,6 +97,13 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
     if not conflicts:
         return None
     _log.debug("occlusion conflicts %s", sorted(conflicts.items()))
+    return conflicts, beyond
+
+
+def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, float]], projector_right: bool = True,
+                  pattern_edge: float = 0.02, beside_placed: bool = False, residue: float = 0.5,
+                  ramp_steps: int = 12) -> int | None:
+    """The offset read off a conflict curve (see ``occlusion_offset``)."""
     if beside_placed:
         sharp = _sharp_minimum(conflicts, beyond)
         if sharp is not None:
@@ -95,25 +114,20 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
         offs, vals = offs[::-1], vals[::-1]
     if len(vals) < 5:
         return None
-    roll = np.array([np.median(vals[i:i + 4]) for i in range(len(vals) - 3)])
-    plateau = float(roll.min())
-    limit = max(2 * plateau, free)
-    j = int(np.argmin(roll))
-    i = j + int(np.argmin(vals[j:j + 4]))
-    while i > 0 and vals[i - 1] <= limit:  # walk toward the conflicts while still conflict-free
+    # the ramp: each stripe the piece slides onto the lit side adds about one column of conflicting cells.
+    # Its step (the mean of the three steepest of the twelve steps below the minimum) sets the scale: a
+    # residue under half a step is stray centres at the outline, not the piece's edge column
+    i = int(np.argmin(vals))
+    floor = float(vals[i])
+    steps = np.sort(-np.diff(vals[max(0, i - ramp_steps):i + 1]))[-3:]
+    step = float(steps.mean()) if len(steps) else 0.0
+    if step <= 0.005:  # no ramp: nothing bounds the piece on the lit side
+        return None
+    while i > 0 and vals[i - 1] - floor < residue * step:
         i -= 1
-    if i == 0 or vals[i - 1] < 2 * max(plateau, 0.005):
+    if i == 0:
         return None
     best = offs[i]
-    # one conflict-free stretch only: a second one (the object could sit elsewhere too) is ambiguous
-    low = vals <= max(4 * plateau, 0.03)  # a second valley, even a shallower one, makes it ambiguous
-    edges = np.diff(np.r_[0, low.astype(np.int8), 0])
-    starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    # a single shallow dip between rising values is noise, not a second place the object could sit
-    valleys = [a for a, b in zip(starts, stops, strict=True)
-               if b - a >= 2 or vals[a] <= max(2 * plateau, free)]
-    if len(valleys) > 1:
-        return None
     # the pattern has n stripes and no more: an offset that puts a real share of the piece past the last
     # (or before the first) stripe is impossible, however conflict-free it looks (an animal that fills the
     # pattern to its edge is common from above)
