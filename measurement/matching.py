@@ -333,6 +333,7 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
             zn = depth_on(rays[nbr], planes[kn])
         else:
             pn = intersect(rays[nbr], planes[kn])
+        own_rays = rays[idx]
         best_k = np.full(len(idx), -1)
         best_d = np.full(len(idx), np.inf)
         for gap in gaps:
@@ -341,12 +342,12 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
             if depth_only:
                 # on a curved body, depth continuity separates a right index (median 3 mm on the simulated
                 # fox, 99 % under 36) from a wrong one (a whole depth step, 35-75 mm) better than 3-D gaps
-                d = np.abs(depth_on(rays[idx], planes[np.clip(k, 0, n - 1)]) - zn)
+                d = np.abs(depth_on(own_rays, planes[np.clip(k, 0, n - 1)]) - zn)
                 # a missing stripe is the rarer event: a wider gap must fit clearly better to win (a
                 # steep flank seen from above makes the right gap of one look discontinuous)
                 d = d + (gap - 1) * GAP_PENALTY_MM
             else:  # on flat backgrounds the 3-D gap per stripe is the sharper test
-                d = np.linalg.norm(intersect(rays[idx], planes[np.clip(k, 0, n - 1)]) - pn, axis=1) / gap
+                d = np.linalg.norm(intersect(own_rays, planes[np.clip(k, 0, n - 1)]) - pn, axis=1) / gap
             better = okk & (d < best_d) & (d < tol_mm)
             best_k[better], best_d[better] = k[better], d[better]
         voters.append(voter)
