@@ -1,6 +1,6 @@
 import numpy as np
 
-from measurement.body import isolate, measure
+from measurement.body import background_margin, isolate, measure
 
 
 def _barrel(length=400.0, radius=100.0, n_stripes=20, rows=60):
@@ -63,3 +63,12 @@ def test_isolation_keeps_a_foot_down_to_a_few_noise_widths_above_the_floor():
     leg_kept = keep[len(pts): len(pts) + len(leg)]
     assert keep[: len(pts)].all() and not keep[len(pts) + len(leg):].any()
     assert leg_kept[height > 4.0].all() and not leg_kept[height < 2.5].any()
+
+
+def test_background_margin_follows_the_planes_noise():
+    rng = np.random.default_rng(2)
+    quiet = np.abs(rng.normal(0, 0.2, 5000))
+    noisy = np.abs(rng.normal(0, 0.8, 5000))
+    assert background_margin(quiet) == 3.0  # 10 sigma = 2 mm, never under 3 mm
+    assert abs(background_margin(noisy) - 8.0) < 0.5  # 10 sigma
+    assert background_margin(np.abs(rng.normal(0, 5.0, 5000))) == 12.0  # never over background_mm
