@@ -123,11 +123,24 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
     step = float(steps.mean()) if len(steps) else 0.0
     if step <= 0.005:  # no ramp: nothing bounds the piece on the lit side
         return None
-    while i > 0 and vals[i - 1] - floor < residue * step:
+    tolerated = vals - floor < residue * step
+    while i > 0 and tolerated[i - 1]:
         i -= 1
     if i == 0:
         return None
     best = offs[i]
+    # the same run followed the other way: when it ends only because the piece would leave the pattern,
+    # both ends are walls and the piece could sit anywhere between them (seen on an animal lit to the
+    # pattern's edge from above): two or more stripes of play is refused rather than guessed
+    side = 1 if projector_right else 0
+    j = i
+    flat = vals - floor < 0.25 * residue * step
+    while j + 1 < len(vals) and flat[j + 1] and beyond[offs[j + 1]][side] <= pattern_edge:
+        j += 1
+    nxt = offs[j] + (1 if projector_right else -1)
+    at_edge = j + 1 >= len(vals) or (flat[j + 1] and beyond[nxt][side] > pattern_edge)
+    if at_edge and j - i >= 2:
+        return None
     # the pattern has n stripes and no more: an offset that puts a real share of the piece past the last
     # (or before the first) stripe is impossible, however conflict-free it looks (an animal that fills the
     # pattern to its edge is common from above)

@@ -51,8 +51,8 @@ def test_offset_of_a_plate_from_its_shadow(x_left, x_right):
 
 def test_a_piece_lit_to_the_last_stripe_is_not_pushed_past_it():
     """Stray centres at the plate's left edge carry one index too few (a partial stripe at an outline);
-    at the true offset they land on lit wall, so the conflict curve alone settles one stripe high, which
-    would put the plate's rightmost stripe past the last one the projector has."""
+    at the true offset they land on lit wall, so the conflict curve alone cannot settle the plate; the
+    pattern's edge can: one stripe higher would put its rightmost stripe past the projector's last."""
     planes, rays, cl, idx, true = _scene(-60.0, 2000.0)
     assert true[idx].max() == N - 1
     k_min = int(true[idx].min())
@@ -63,7 +63,8 @@ def test_a_piece_lit_to_the_last_stripe_is_not_pushed_past_it():
     r[idx] = true[idx] - k_min
     r[len(true):] = -1
     idx = np.concatenate([idx, np.arange(len(true), len(rays))])
-    assert occlusion_offset(rays, planes, cl, r, idx, N, projector_right=True, pattern_edge=1.0) == k_min + 1
+    # without the pattern's edge the stray column's conflicts leave the plate unplaced or one stripe high
+    assert occlusion_offset(rays, planes, cl, r, idx, N, projector_right=True, pattern_edge=1.0) != k_min
     assert occlusion_offset(rays, planes, cl, r, idx, N, projector_right=True) == k_min
 
 
@@ -80,3 +81,19 @@ def test_a_piece_hemmed_in_on_both_sides_is_read_at_the_bottom_of_its_curve():
     # past the last stripe counts as a wall: the piece lit up to the pattern's edge is a V too
     edge = {**no_edge, 15: (0.0, 0.3), 16: (0.0, 0.6)}
     assert _sharp_minimum({12: 0.31, 13: 0.13, 14: 0.01}, edge) == 14
+
+
+def test_a_piece_with_play_between_its_conflicts_and_the_pattern_edge_is_refused():
+    """Conflicts rise below offset 20; above it nothing conflicts until the piece would leave the
+    pattern. One stripe of play: the offset nearest the conflicts. Four: it could sit anywhere."""
+    from measurement.offsets import choose_offset
+
+    ramp = {o: 0.04 * (20 - o) for o in range(8, 20)}
+
+    def curve(last_inside):
+        conflicts = {**ramp, **{o: 0.0 for o in range(20, last_inside + 4)}}
+        beyond = {o: (0.0, 0.0 if o <= last_inside else 0.05 * (o - last_inside)) for o in conflicts}
+        return conflicts, beyond
+
+    assert choose_offset(*curve(21)) == 20
+    assert choose_offset(*curve(24)) is None
