@@ -49,3 +49,17 @@ def test_anatomy_is_reported_in_camera_coordinates(small_truth):
     tail = np.array(a["tail_centreline"])
     assert tail.shape[1] == 3 and 900 < tail[:, 2].mean() < 1500
     assert np.isclose(np.linalg.norm(np.subtract(*a["neck_landmarks"])), a["neck_width_mm"])
+
+
+def test_a_mesh_is_stood_up_by_its_extents_whatever_axis_its_file_calls_up(tmp_path):
+    """Length > height > width: the longest axis becomes x, the middle one up (y), feet on y = 0."""
+    import trimesh
+
+    from measurement.simulate.animal import from_mesh
+
+    path = tmp_path / "z_long_x_up.obj"
+    trimesh.creation.box(extents=(100.0, 40.0, 300.0)).export(path)
+    a = from_mesh(str(path), length_mm=600.0)
+    ext = a.vertices.max(axis=0) - a.vertices.min(axis=0)
+    np.testing.assert_allclose(ext, [600.0, 200.0, 80.0], atol=1e-9)
+    assert a.vertices[:, 1].min() == 0.0

@@ -122,17 +122,18 @@ def quadruped(length_mm: float = 300.0, seed: int = 0) -> Animal:
 def from_mesh(path: str, length_mm: float = 600.0) -> Animal:
     """Any trimesh-loadable mesh, scaled so its longest horizontal extent is ``length_mm``, feet on y = 0.
 
-    The mesh's up axis is guessed as the bounding-box axis that is neither the longest nor ... the
-    shortest horizontal one: y if the file is y-up (most OBJ exports), else z."""
+    Axes by extent: the longest becomes the body axis (x), the middle one up (y), the shortest the
+    width (z) -- length > height > width holds for the shared quadrupeds whichever axis their file
+    calls up (y-up OBJ exports, the z-up horse). The up axis keeps its file sign."""
     loaded: trimesh.Trimesh = trimesh.load(path, force="mesh")  # type: ignore[assignment]
     v = np.asarray(loaded.vertices, dtype=np.float64)
     ext = v.max(axis=0) - v.min(axis=0)
-    if ext[2] > ext[1] and ext[2] < ext[0] and "z-up" in path:
-        v = v[:, [0, 2, 1]] * [1, 1, -1]
-        ext = v.max(axis=0) - v.min(axis=0)
-    if ext[2] > ext[0]:  # make the long axis x
-        v = v[:, [2, 1, 0]] * [1, 1, -1]
-        ext = v.max(axis=0) - v.min(axis=0)
+    long_, up, short = int(np.argmax(ext)), int(np.argsort(ext)[1]), int(np.argmin(ext))
+    rot = np.zeros((3, 3))
+    rot[0, long_], rot[1, up], rot[2, short] = 1.0, 1.0, 1.0
+    rot[2] *= np.linalg.det(rot)  # a rotation, not a mirror
+    v = v @ rot.T
+    ext = v.max(axis=0) - v.min(axis=0)
     v = (v - [(v[:, 0].max() + v[:, 0].min()) / 2, v[:, 1].min(), (v[:, 2].max() + v[:, 2].min()) / 2])
     v *= length_mm / ext[0]
     faces = np.asarray(loaded.faces, np.int64)
