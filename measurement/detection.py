@@ -31,7 +31,9 @@ class DetectionParams:
     weak_contrast, link_px : hysteresis: a weaker peak (above weak_contrast, two-sided: see min_flank) is a
                     centre too when a chain of such peaks, each within link_px columns of one in the next
                     or next-but-one row, reaches a centre above min_contrast. Recovers the faint ends of a
-                    stripe where it grazes the back, a foot or the flank seen from above; 0 turns it off
+                    stripe where it grazes the back, a foot or the flank seen from above (4.0 does; 0, the
+                    default for now, turns it off: it changes the centres the labelling sees, and the
+                    animal's absolute stripe offset still flips with such changes on some views)
     sigma_x, sigma_y : smoothing across and along the (near-vertical) stripes before peak finding
     min_flank, flank_ratio : a reliable centre falls on each side, within half the background window, by at
                     least max(min_flank, flank_ratio * contrast) gray levels (a stripe is a peak; the
@@ -43,7 +45,7 @@ class DetectionParams:
     background_px: int = 17
     peak_px: int = 4
     min_contrast: float = 8.0
-    weak_contrast: float = 4.0
+    weak_contrast: float = 0.0
     link_px: float = 2.0
     sigma_x: float = 1.0
     sigma_y: float = 1.5
@@ -210,8 +212,8 @@ def _refine(s: np.ndarray, bg: np.ndarray, x: np.ndarray, y: np.ndarray, half: i
     right[right == 0] = half + 1
     left[left == 0] = half + 1
     run = (offs >= 1 - left[:, None]) & (offs <= right[:, None] - 1)
-    wts = (vals - level) * run
-    u = x + (wts @ offs.astype(np.float32)) / np.maximum(wts.sum(axis=1), 1e-6)
+    wts = np.where(run, vals - level, 0.0)
+    u = x + (wts * offs).sum(axis=1) / np.maximum(wts.sum(axis=1), 1e-6)
     return u.astype(np.float64), (left + right - 1).astype(np.float32), flank.astype(np.float32)
 
 

@@ -94,16 +94,16 @@ def test_a_stripe_widened_at_a_grazing_surface_is_unreliable():
     assert widened.any() and ok[~widened].all() and not ok[widened].any()
 
 
-def test_a_faint_stripe_end_is_followed_from_its_bright_part_but_a_faint_stripe_alone_is_not():
+def test_with_hysteresis_a_faint_stripe_end_is_followed_from_its_bright_part_but_a_faint_stripe_alone_is_not():
     x = np.arange(3072, dtype=float)
     bright = 20 + 60 * np.exp(-0.5 * ((x - 500) / 2.0) ** 2)
     faint = 20 + 7 * (np.exp(-0.5 * ((x - 500) / 2.0) ** 2) + np.exp(-0.5 * ((x - 1500) / 2.0) ** 2))
     img = np.vstack([_row_image(bright, 40), _row_image(faint, 40)])
-    c = detect_centres(img)
+    c = detect_centres(img, DetectionParams(weak_contrast=4.0))
     tail = (np.abs(c.u - 500) < 1) & (c.v >= 45)
     assert set(c.v[tail].tolist()) == set(range(45, 80))  # the grazing end of a stripe is kept
     assert not (np.abs(c.u - 1500) < 5).any()  # a faint stripe linked to no bright one is not
-    off = detect_centres(img, DetectionParams(weak_contrast=0))
+    off = detect_centres(img)  # hysteresis is off by default
     assert not ((np.abs(off.u - 500) < 1) & (off.v >= 45)).any()
 
 
