@@ -333,21 +333,28 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
             zn = depth_on(rays[nbr], planes[kn])
         else:
             pn = intersect(rays[nbr], planes[kn])
-        own_rays = rays[idx]
+        # the voters' points on the planes of every gap at once (row by row as one gap at a time)
+        ks = [kn + sign * gap for gap in gaps]
+        on_k = np.concatenate([np.clip(k, 0, n - 1) for k in ks])
+        voter_rays = np.tile(rays[idx], (len(gaps), 1))
+        if depth_only:
+            z_gap = depth_on(voter_rays, planes[on_k]).reshape(len(gaps), -1)
+        else:
+            p_gap = intersect(voter_rays, planes[on_k]).reshape(len(gaps), -1, 3)
         best_k = np.full(len(idx), -1)
         best_d = np.full(len(idx), np.inf)
-        for gap in gaps:
-            k = kn + sign * gap
+        for g, gap in enumerate(gaps):
+            k = ks[g]
             okk = (k >= 0) & (k < n)
             if depth_only:
                 # on a curved body, depth continuity separates a right index (median 3 mm on the simulated
                 # fox, 99 % under 36) from a wrong one (a whole depth step, 35-75 mm) better than 3-D gaps
-                d = np.abs(depth_on(own_rays, planes[np.clip(k, 0, n - 1)]) - zn)
+                d = np.abs(z_gap[g] - zn)
                 # a missing stripe is the rarer event: a wider gap must fit clearly better to win (a
                 # steep flank seen from above makes the right gap of one look discontinuous)
                 d = d + (gap - 1) * GAP_PENALTY_MM
             else:  # on flat backgrounds the 3-D gap per stripe is the sharper test
-                d = np.linalg.norm(intersect(own_rays, planes[np.clip(k, 0, n - 1)]) - pn, axis=1) / gap
+                d = np.linalg.norm(p_gap[g] - pn, axis=1) / gap
             better = okk & (d < best_d) & (d < tol_mm)
             best_k[better], best_d[better] = k[better], d[better]
         voters.append(voter)
