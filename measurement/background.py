@@ -136,6 +136,12 @@ def segments_on_planes(rays, planes, seg, seg_label: dict[int, int], bg_planes, 
     return set(sids[on].tolist())
 
 
+def segment_on_planes(rays, planes, seg, sid, k, bg_planes, share: float = 0.9) -> bool:
+    """Whether segment ``sid`` on light plane ``k`` lies on the background planes (one segment of
+    ``segments_on_planes``)."""
+    return sid in segments_on_planes(rays, planes, seg, {int(sid): int(k)}, bg_planes, share)
+
+
 def split_foreground(c, seg, labels, on_bg, link, min_rows):
     """Unlabel centres off the background and re-link them into their own segments."""
     m = len(seg)
