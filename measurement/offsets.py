@@ -35,12 +35,23 @@ def projector_elevation(points: np.ndarray, planes: np.ndarray) -> np.ndarray:
     """Elevation of each point (M, 3) as seen from the projector along its stripe: tan of the angle
     between the ray and the plane perpendicular to the shared axis (the projector's row coordinate)."""
 
-    centre = projector_centre(planes)
     _, a = pencil_axis(planes)
+    return _elevation(points, projector_centre(planes), a)
+
+
+def _elevation(points: np.ndarray, centre: np.ndarray, a: np.ndarray) -> np.ndarray:
     q = points - centre
     along = q @ a
     across = np.linalg.norm(q - along[:, None] * a, axis=1)
     return along / np.maximum(across, 1e-9)
+
+
+def _in_sorted(x: np.ndarray, sorted_values: np.ndarray) -> np.ndarray:
+    """``np.isin(x, sorted_values)`` for a sorted array, without sorting it again."""
+    if len(sorted_values) == 0:
+        return np.zeros(len(x), bool)
+    pos = np.minimum(np.searchsorted(sorted_values, x), len(sorted_values) - 1)
+    return sorted_values[pos] == x
 
 
 def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, bins: float = 0.002,
@@ -77,11 +88,15 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002
         return None
     pb = intersect(rays[bg], planes[cl[bg]])
     eb = np.floor(projector_elevation(pb, planes) / bins).astype(np.int64)
-    lit = np.unique(cl[bg] * 1_000_000 + eb)
-    deep = lit[np.isin(lit - 2, lit) & np.isin(lit + 2, lit) & np.isin(lit - 1, lit) & np.isin(lit + 1, lit)]
+    lit = np.unique(cl[bg] * 1_000_000 + eb)  # sorted
+    deep = lit[_in_sorted(lit - 2, lit) & _in_sorted(lit + 2, lit) & _in_sorted(lit - 1, lit)
+               & _in_sorted(lit + 1, lit)]  # sorted too
     rr = r[idx]
     sub = idx if len(idx) <= 20000 else idx[:: len(idx) // 20000 + 1]
     rs = r[sub]
+    rays_sub = rays[sub]
+    centre = projector_centre(planes)
+    _, axis = pencil_axis(planes)
     conflicts = {}
     beyond = {}  # share of the piece that an offset pushes past the first (< 0) or last (>= n) stripe
     for off in range(-int(rr.max()), n - int(rr.min())):
@@ -90,10 +105,10 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002
         beyond[off] = (float(np.mean(k < 0)), float(np.mean(k >= n)))
         if inside.mean() < 0.8:
             continue
-        p = intersect(rays[sub][inside], planes[k[inside]])
-        e = np.floor(projector_elevation(p, planes) / bins).astype(np.int64)
+        p = intersect(rays_sub[inside], planes[k[inside]])
+        e = np.floor(_elevation(p, centre, axis) / bins).astype(np.int64)
         cells = np.unique(k[inside] * 1_000_000 + e)
-        conflicts[off] = float(np.isin(cells, deep).mean())
+        conflicts[off] = float(_in_sorted(cells, deep).mean())
     if not conflicts:
         return None
     _log.debug("occlusion conflicts %s", sorted(conflicts.items()))
