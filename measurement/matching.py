@@ -192,9 +192,13 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
             break
         trial = {seed: mid}
         _grow_all(c, rays, planes, seg, trial, remaining, left, right, tol, n, None, depth_only=True)
-        _refine(c, rays, planes, seg, trial, remaining & np.isin(seg, list(trial)), left, right, tol, n)
+        in_trial = np.zeros(seg.max() + 1, bool)
+        in_trial[np.fromiter(trial, np.int64)] = True
+        _refine(c, rays, planes, seg, trial, remaining & in_trial[seg], left, right, tol, n)
         members = np.array(sorted(trial))
-        in_cluster = np.isin(seg, members) & remaining
+        in_trial[:] = False
+        in_trial[members] = True
+        in_cluster = in_trial[seg] & remaining
         remaining &= ~in_cluster
         biggest = max(biggest, int(in_cluster.sum()))
         if in_cluster.sum() < max(50, SMALL_PIECE * biggest):  # small pieces carry too little shadow evidence
