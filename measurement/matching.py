@@ -115,11 +115,15 @@ class Labels:
 
     stripe     : (M,) int64 light-plane index, -1 where none can be trusted
     background : (P, 4) planes [n, d] of the floor / wall (mm), or None
+    pieces     : centres in the pieces off the floor and wall that were weighed for an index
+    unplaced   : of those, centres left without one (no evidence fixed the piece's absolute index)
     """
 
     stripe: np.ndarray
     background: np.ndarray | None
     segment: np.ndarray | None = None
+    pieces: int = 0
+    unplaced: int = 0
 
 
 def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple[int, int],
@@ -155,7 +159,8 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     if bg_planes is not None:
         seg_label.update(claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, depth=z_all))
     # 4: foreground clusters: relative labels by growing from a seed, offset from the shadow they cast
-    fg_labels = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all,
+    weighed = np.zeros(m, bool)
+    fg_labels = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, weighed,
                             params.depth_range_mm)
     if fg_labels:
         # pieces of the animal without shadow evidence of their own continue a labelled piece's surface
@@ -172,11 +177,14 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     zmin, zmax = params.depth_range_mm
     z = np.where(ok, z_all[np.arange(m), np.clip(labels, 0, n - 1)], np.nan)
     labels[ok & ~((z > zmin) & (z < zmax))] = -1
-    return Labels(_enforce_row_order(c, labels), bg_planes, seg)
+    labels = _enforce_row_order(c, labels)
+    return Labels(labels, bg_planes, seg, int(weighed.sum()), int((weighed & (labels < 0)).sum()))
 
 
-def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, zrange) -> dict[int, int]:
-    """Labels for the segments the background did not claim, cluster by cluster."""
+def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, weighed, zrange
+                ) -> dict[int, int]:
+    """Labels for the segments the background did not claim, cluster by cluster; marks in ``weighed``
+    (M,) the centres of every piece that was weighed for an offset."""
     out: dict[int, int] = {}
     labelled = np.zeros(seg.max() + 1, bool)
     labelled[list(seg_label)] = True
@@ -204,6 +212,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         if in_cluster.sum() < max(50, SMALL_PIECE * biggest):  # small pieces carry too little shadow evidence
             continue
         idx = np.nonzero(in_cluster)[0]
+        weighed[idx] = True
         rel = np.full(seg.max() + 1, 0, np.int64)
         for sid, k in trial.items():
             rel[sid] = k - mid

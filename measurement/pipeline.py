@@ -93,4 +93,20 @@ def scan(image: np.ndarray, calibration: Calibration, view: str = "side", ambien
     timings["total"] = round(1000 * (t["measure"] - t["start"]), 2)
     meas["centres"] = int(len(centres))
     meas["scene_point_count"] = int(len(pts))
+    meas["unplaced_share"] = round(labels.unplaced / labels.pieces, 4) if labels.pieces else 0.0
+    meas["warnings"] = _warnings(meas, labels)
     return ScanResult(pts[animal], stripe[animal], uv[animal], pts, stripe, uv, meas, timings)
+
+
+def _warnings(meas: dict, labels) -> list[str]:
+    """What a technician should know before trusting the numbers."""
+    out = []
+    if labels.pieces and labels.unplaced > 0.3 * labels.pieces:
+        out.append(f"{100 * labels.unplaced / labels.pieces:.0f} % of the stripe light on the animal could not be "
+                   "matched to a light plane (nothing in the image fixed which stripe it was), so those parts "
+                   "are missing from the cloud; this happens when the animal fills the stripe pattern to its "
+                   "edge or casts no visible shadow: move it so that stripes fall on the floor or wall on both "
+                   "sides of it")
+    if meas.get("body_length_mm") is None or meas.get("body_height_mm") is None:
+        out.append("no body length or height: too few animal points were reconstructed")
+    return out

@@ -97,3 +97,31 @@ def test_camera_only_or_other_stripe_count_calibrations_are_refused(small_captur
         scan(img, Calibration(truth_cal.intrinsics, truth_cal.planes[::3]))
     with pytest.raises(ScanError, match="view"):
         scan(img, truth_cal, "under")
+
+
+def test_a_scan_says_when_the_animal_could_not_be_placed(small_capture, monkeypatch):
+    """When nothing fixes the animal's stripe indices the scan gives no numbers and says why, rather
+    than numbers from a guessed index. Simulated by taking back every index the labeller gave off the
+    floor and wall planes, as a refused piece leaves them."""
+    import measurement.pipeline as pipeline
+    from measurement.matching import Labels
+
+    cal = load_calibration(small_capture / "truth" / "truth.json")
+    img = read_image(small_capture / "scan" / "side.png")
+    ok = scan(img, cal, "side")
+    assert ok.measurements["warnings"] == [] and ok.measurements["body_height_mm"] is not None
+
+    def refuse_the_animal(c, rays, planes, shape, params):
+        lab = label_centres(c, rays, planes, shape, params)
+        placed = np.nonzero(lab.stripe >= 0)[0]
+        p = intersect(rays[placed], planes[lab.stripe[placed]])
+        off_bg = np.abs(p @ lab.background[:, :3].T - lab.background[:, 3]).min(axis=1) > 15
+        stripe = lab.stripe.copy()
+        stripe[placed[off_bg]] = -1
+        return Labels(stripe, lab.background, lab.segment, int(off_bg.sum()), int(off_bg.sum()))
+
+    monkeypatch.setattr(pipeline, "label_centres", refuse_the_animal)
+    r = scan(img, cal, "side")
+    assert r.measurements["unplaced_share"] == 1.0
+    assert r.measurements["body_height_mm"] is None
+    assert any("could not be matched to a light plane" in w for w in r.measurements["warnings"])
