@@ -32,7 +32,7 @@ from .background import (
     split_foreground,
 )
 from .detection import Centres
-from .offsets import occlusion_offset, projector_right
+from .offsets import conflict_curve, occlusion_offset, projector_right, sharp_minimum
 from .segments import (
     denoise,
     link_segments,
@@ -160,8 +160,8 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
         seg_label.update(claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, depth=z_all))
     # 4: foreground clusters: relative labels by growing from a seed, offset from the shadow they cast
     weighed = np.zeros(m, bool)
-    fg_labels = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, weighed,
-                            params.depth_range_mm)
+    fg_labels, small = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all,
+                                   weighed, params.depth_range_mm)
     if fg_labels:
         # pieces of the animal without shadow evidence of their own continue a labelled piece's surface
         is_bg = np.zeros(seg.max() + 1, bool)
@@ -172,6 +172,8 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
         _grow_all(c, rays, planes, seg, fg_labels, fg_mask, left, right, tol, n, None, depth_only=True,
                   gaps=(1,), min_share=0.8)
     seg_label.update(fg_labels)
+    if fg_labels and small:  # isolated small pieces (a head seen from above) hemmed in by what is placed
+        seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed))
     labels = _labels_of(seg, seg_label, long_seg)
     ok = labels >= 0
     zmin, zmax = params.depth_range_mm
@@ -182,17 +184,20 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
 
 
 def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, weighed, zrange
-                ) -> dict[int, int]:
-    """Labels for the segments the background did not claim, cluster by cluster; marks in ``weighed``
-    (M,) the centres of every piece that was weighed for an offset."""
+                ) -> tuple[dict[int, int], list]:
+    """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
+    (M,) the centres of every piece that was weighed for an offset.
+
+    Pieces are found first (relative indices by depth continuity from a seed), then the large ones are
+    placed, largest first, each from its conflict curve; the small ones (under ``SMALL_PIECE`` of the
+    largest) are returned for ``_place_small``, after growth from the placed pieces had its turn."""
     out: dict[int, int] = {}
     labelled = np.zeros(seg.max() + 1, bool)
     labelled[list(seg_label)] = True
     remaining = long_seg & ~labelled[seg]
     cl = _labels_of(seg, seg_label, long_seg)
     mid = n // 2
-    biggest = 0
-    placed_max = 0  # centres in the largest piece placed so far
+    pieces = []
     while remaining.sum() >= 50:
         sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)
         seed = int(np.argmax(sizes))
@@ -203,19 +208,23 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         in_trial = np.zeros(seg.max() + 1, bool)
         in_trial[np.fromiter(trial, np.int64)] = True
         _refine(c, rays, planes, seg, trial, remaining & in_trial[seg], left, right, tol, n)
-        members = np.array(sorted(trial))
         in_trial[:] = False
-        in_trial[members] = True
+        in_trial[np.fromiter(trial, np.int64)] = True
         in_cluster = in_trial[seg] & remaining
         remaining &= ~in_cluster
-        biggest = max(biggest, int(in_cluster.sum()))
-        if in_cluster.sum() < max(50, SMALL_PIECE * biggest):  # small pieces carry too little shadow evidence
+        if in_cluster.sum() >= 50:
+            pieces.append((np.nonzero(in_cluster)[0], dict(trial)))
+    pieces.sort(key=lambda pc: -len(pc[0]))
+    biggest = len(pieces[0][0]) if pieces else 0
+    placed_max = 0  # centres in the largest piece placed so far
+    small = []
+    for idx, trial in pieces:
+        if len(idx) < SMALL_PIECE * biggest:  # too little shadow evidence of its own
+            small.append((idx, trial))
             continue
-        idx = np.nonzero(in_cluster)[0]
         weighed[idx] = True
-        rel = np.full(seg.max() + 1, 0, np.int64)
-        for sid, k in trial.items():
-            rel[sid] = k - mid
+        rel = np.zeros(seg.max() + 1, np.int64)
+        rel[np.fromiter(trial, np.int64)] = np.fromiter(trial.values(), np.int64) - mid
         off = occlusion_offset(rays, planes, cl, rel[seg], idx, n, projector_right(planes),
                                beside_placed=len(idx) < placed_max)
         if _TRACE is not None:
@@ -227,7 +236,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         z = z_all[idx[inside], lab[inside]]
         if inside.mean() < 0.8 or np.mean((z > zrange[0]) & (z < zrange[1])) < 0.9:
             continue
-        for sid in members:
+        for sid in trial:
             if 0 <= rel[sid] + off < n:
                 out[int(sid)] = int(rel[sid] + off)
         # a projector ray lights one surface only: the cells of a labelled piece are as good as lit
@@ -235,6 +244,34 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         placed = idx[inside]
         cl[placed] = lab[inside]
         placed_max = max(placed_max, len(idx))
+    return out, small
+
+
+def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed) -> dict[int, int]:
+    """Labels for the small pieces that growth from their neighbours did not reach: each is placed only
+    where the background and the pieces already labelled hem it in on both sides (the bottom of a V in
+    its conflict curve); the others stay unlabelled."""
+    out: dict[int, int] = {}
+    cl = _labels_of(seg, seg_label, long_seg)
+    mid = n // 2
+    for idx, trial in small:
+        if (cl[idx] >= 0).any():
+            continue
+        weighed[idx] = True
+        rel = np.zeros(seg.max() + 1, np.int64)
+        rel[np.fromiter(trial, np.int64)] = np.fromiter(trial.values(), np.int64) - mid
+        curve = conflict_curve(rays, planes, cl, rel[seg], idx, n)
+        off = sharp_minimum(*curve) if curve is not None else None
+        if _TRACE is not None:
+            _TRACE.append((idx, rel[seg[idx]], off))
+        if off is None:
+            continue
+        lab = rel[seg[idx]] + off
+        inside = (lab >= 0) & (lab < n)
+        for sid in trial:
+            if 0 <= rel[sid] + off < n:
+                out[int(sid)] = int(rel[sid] + off)
+        cl[idx[inside]] = lab[inside]
     return out
 
 

@@ -120,7 +120,7 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
                   ramp_steps: int = 12) -> int | None:
     """The offset read off a conflict curve (see ``occlusion_offset``)."""
     if beside_placed:
-        sharp = _sharp_minimum(conflicts, beyond)
+        sharp = sharp_minimum(conflicts, beyond)
         if sharp is not None:
             return sharp
     offs = sorted(conflicts)
@@ -167,7 +167,7 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
 
 
 
-def _sharp_minimum(conflicts: dict[int, float], beyond: dict[int, tuple[float, float]]) -> int | None:
+def sharp_minimum(conflicts: dict[int, float], beyond: dict[int, tuple[float, float]]) -> int | None:
     """The offset at the bottom of a V: conflicts (plus the share pushed past the pattern) rise on both
     sides within two stripes. A piece whose every neighbouring cell is lit or taken by an already placed
     piece (a tail beside the body, a leg in front of the wall) shows this shape, and its bottom is the

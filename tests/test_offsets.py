@@ -71,16 +71,16 @@ def test_a_piece_lit_to_the_last_stripe_is_not_pushed_past_it():
 def test_a_piece_hemmed_in_on_both_sides_is_read_at_the_bottom_of_its_curve():
     """A tail beside an already placed body: conflicts rise both ways, so the minimum is the answer
     even with a residue on it; a one-sided curve (conflict-free toward unseen cells) is not a V."""
-    from measurement.offsets import _sharp_minimum
+    from measurement.offsets import sharp_minimum
 
     v_shape = {12: 0.31, 13: 0.13, 14: 0.003, 15: 0.10, 16: 0.20}
     no_edge = {o: (0.0, 0.0) for o in range(10, 20)}
-    assert _sharp_minimum(v_shape, no_edge) == 14
+    assert sharp_minimum(v_shape, no_edge) == 14
     one_sided = {12: 0.31, 13: 0.06, 14: 0.0, 15: 0.0, 16: 0.0}
-    assert _sharp_minimum(one_sided, no_edge) is None
+    assert sharp_minimum(one_sided, no_edge) is None
     # past the last stripe counts as a wall: the piece lit up to the pattern's edge is a V too
     edge = {**no_edge, 15: (0.0, 0.3), 16: (0.0, 0.6)}
-    assert _sharp_minimum({12: 0.31, 13: 0.13, 14: 0.01}, edge) == 14
+    assert sharp_minimum({12: 0.31, 13: 0.13, 14: 0.01}, edge) == 14
 
 
 def test_a_piece_with_play_between_its_conflicts_and_the_pattern_edge_is_refused():
