@@ -188,16 +188,19 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
     (M,) the centres of every piece that was weighed for an offset.
 
-    Pieces are found first (relative indices by depth continuity from a seed), then the large ones are
-    placed, largest first, each from its conflict curve; the small ones (under ``SMALL_PIECE`` of the
-    largest) are returned for ``_place_small``, after growth from the placed pieces had its turn."""
+    Each piece gets relative indices by depth continuity from a seed (the longest segment left) and is
+    placed from its conflict curve, with the pieces placed before it counting as lit; pieces under
+    ``SMALL_PIECE`` of the largest so far are returned for ``_place_small``, which runs after growth
+    from the placed pieces had its turn."""
     out: dict[int, int] = {}
     labelled = np.zeros(seg.max() + 1, bool)
     labelled[list(seg_label)] = True
     remaining = long_seg & ~labelled[seg]
     cl = _labels_of(seg, seg_label, long_seg)
     mid = n // 2
-    pieces = []
+    biggest = 0
+    placed_max = 0  # centres in the largest piece placed so far
+    small = []
     while remaining.sum() >= 50:
         sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)
         seed = int(np.argmax(sizes))
@@ -212,15 +215,11 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         in_trial[np.fromiter(trial, np.int64)] = True
         in_cluster = in_trial[seg] & remaining
         remaining &= ~in_cluster
-        if in_cluster.sum() >= 50:
-            pieces.append((np.nonzero(in_cluster)[0], dict(trial)))
-    pieces.sort(key=lambda pc: -len(pc[0]))
-    biggest = len(pieces[0][0]) if pieces else 0
-    placed_max = 0  # centres in the largest piece placed so far
-    small = []
-    for idx, trial in pieces:
-        if len(idx) < SMALL_PIECE * biggest:  # too little shadow evidence of its own
-            small.append((idx, trial))
+        biggest = max(biggest, int(in_cluster.sum()))
+        idx = np.nonzero(in_cluster)[0]
+        if len(idx) < max(50, SMALL_PIECE * biggest):  # too little shadow evidence of its own
+            if len(idx) >= 50:
+                small.append((idx, dict(trial)))
             continue
         weighed[idx] = True
         rel = np.zeros(seg.max() + 1, np.int64)
