@@ -222,8 +222,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
                 small.append((idx, dict(trial)))
             continue
         weighed[idx] = True
-        rel = np.zeros(seg.max() + 1, np.int64)
-        rel[np.fromiter(trial, np.int64)] = np.fromiter(trial.values(), np.int64) - mid
+        rel = _relative(seg, trial, mid)
         off = occlusion_offset(rays, planes, cl, rel[seg], idx, n, projector_right(planes),
                                beside_placed=len(idx) < placed_max)
         if _TRACE is not None:
@@ -235,9 +234,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         z = z_all[idx[inside], lab[inside]]
         if inside.mean() < 0.8 or np.mean((z > zrange[0]) & (z < zrange[1])) < 0.9:
             continue
-        for sid in trial:
-            if 0 <= rel[sid] + off < n:
-                out[int(sid)] = int(rel[sid] + off)
+        out.update(_placed(trial, rel, off, n))
         # a projector ray lights one surface only: the cells of a labelled piece are as good as lit
         # background for the pieces after it (a tail must not slide into the body's own shadow)
         placed = idx[inside]
@@ -257,8 +254,7 @@ def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed) -> d
         if (cl[idx] >= 0).any():
             continue
         weighed[idx] = True
-        rel = np.zeros(seg.max() + 1, np.int64)
-        rel[np.fromiter(trial, np.int64)] = np.fromiter(trial.values(), np.int64) - mid
+        rel = _relative(seg, trial, mid)
         curve = conflict_curve(rays, planes, cl, rel[seg], idx, n)
         off = sharp_minimum(*curve) if curve is not None else None
         if _TRACE is not None:
@@ -267,11 +263,21 @@ def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed) -> d
             continue
         lab = rel[seg[idx]] + off
         inside = (lab >= 0) & (lab < n)
-        for sid in trial:
-            if 0 <= rel[sid] + off < n:
-                out[int(sid)] = int(rel[sid] + off)
+        out.update(_placed(trial, rel, off, n))
         cl[idx[inside]] = lab[inside]
     return out
+
+
+def _relative(seg: np.ndarray, trial: dict[int, int], mid: int) -> np.ndarray:
+    """Per-segment index relative to the piece's seed (S,), from a segment -> trial label map."""
+    rel = np.zeros(seg.max() + 1, np.int64)
+    rel[np.fromiter(trial, np.int64)] = np.fromiter(trial.values(), np.int64) - mid
+    return rel
+
+
+def _placed(trial: dict[int, int], rel: np.ndarray, off: int, n: int) -> dict[int, int]:
+    """Segment -> absolute label for the segments of a piece placed at ``off`` that land on a stripe."""
+    return {int(sid): int(rel[sid] + off) for sid in trial if 0 <= rel[sid] + off < n}
 
 
 def _labels_of(seg: np.ndarray, seg_label: dict[int, int], long_seg: np.ndarray) -> np.ndarray:
