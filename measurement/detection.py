@@ -123,10 +123,9 @@ def detect_centres(image: np.ndarray, params: DetectionParams = DetectionParams(
     low = params.weak_contrast if params.weak_contrast > 0 else params.min_contrast
     cand = cv2.bitwise_and(cand, cv2.compare(contrast, np.full_like(contrast, int(low)), cv2.CMP_GT))
     # on a flat-topped peak keep only its first pixel: strictly brighter than the left neighbour
-    left = np.empty_like(s)
-    left[:, 1:] = s[:, :-1]
-    left[:, 0] = 255
-    cand = cv2.bitwise_and(cand, cv2.compare(s, left, cv2.CMP_GT))
+    first = np.zeros_like(cand)
+    first[:, 1:] = cv2.compare(s[:, 1:], s[:, :-1], cv2.CMP_GT)
+    cand = cv2.bitwise_and(cand, first)
     pts = cv2.findNonZero(cand)
     if pts is None:
         return Centres(np.zeros(0), np.zeros(0, np.int32), np.zeros(0, np.float32), np.zeros(0, np.float32),
@@ -193,28 +192,25 @@ def _refine(s: np.ndarray, bg: np.ndarray, x: np.ndarray, y: np.ndarray, half: i
             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centroid of the part of each peak above half its height, within +-half pixels; that part's width;
     and the peak's height above the higher of its two side minima (within half - 1 pixels each side)."""
-    h, w = s.shape
-    offs = np.arange(-half, half + 1)
-    cols = x[:, None] + offs[None, :]
-    edge = (x < half) | (x >= w - half)
-    cols[edge] = np.clip(cols[edge], 0, w - 1)
-    raw = s.ravel()[(y * w)[:, None] + cols]
+    n = 2 * half + 1
+    # (n, M) window of each peak, the row's end pixel repeated past the border
+    pad = cv2.copyMakeBorder(s, 0, 0, half, half, cv2.BORDER_REPLICATE)
+    raw = np.ascontiguousarray(np.lib.stride_tricks.sliding_window_view(pad, n, axis=1)[y, x].T)
     # each side window holds the peak itself, so the difference cannot wrap around in uint8
-    flank = (raw[:, half] - np.maximum(raw[:, 1:half + 1].min(axis=1), raw[:, half:2 * half].min(axis=1)))
-    vals = raw.astype(np.float32)
-    base = bg[y, x].astype(np.float32)[:, None]
-    level = base + 0.5 * (vals[:, half:half + 1] - base)
-    above = vals > level
-    # keep only the contiguous run through the peak (a neighbouring stripe must not pull the centroid):
-    # the first pixel below the level on each side (argmin of a bool row; 0 means none, the peak is above)
-    right = above[:, half:].argmin(axis=1)
-    left = above[:, half::-1].argmin(axis=1)
-    right[right == 0] = half + 1
-    left[left == 0] = half + 1
-    run = (offs >= 1 - left[:, None]) & (offs <= right[:, None] - 1)
-    wts = np.where(run, vals - level, 0.0)
-    u = x + (wts * offs).sum(axis=1) / np.maximum(wts.sum(axis=1), 1e-6)
-    return u.astype(np.float64), (left + right - 1).astype(np.float32), flank.astype(np.float32)
+    flank = raw[half] - np.maximum(raw[1:half + 1].min(axis=0), raw[half:2 * half].min(axis=0))
+    # twice each pixel's height above the level (half way from the background to the peak): integers,
+    # so the centroid below is the exact ratio whatever the order of summation
+    h2 = raw.astype(np.int16) * 2 - (bg[y, x].astype(np.int16) + raw[half])
+    # keep only the contiguous run through the peak (a neighbouring stripe must not pull the centroid);
+    run = h2 > 0
+    for k in range(1, half + 1):
+        run[half + k] &= run[half + k - 1]
+        run[half - k] &= run[half - k + 1]
+    wts = h2 * run
+    offs = np.arange(-half, half + 1, dtype=np.int16)
+    u = x + (wts * offs[:, None]).sum(axis=0, dtype=np.int32) / np.maximum(wts.sum(axis=0, dtype=np.int32), 1)
+    width = run.sum(axis=0)
+    return u.astype(np.float64), width.astype(np.float32), flank.astype(np.float32)
 
 
 def check_image(image: np.ndarray, expected: tuple[int, int] | None, name: str = "image") -> None:
