@@ -28,9 +28,13 @@ def fit_plane_tls(points: np.ndarray, weights: np.ndarray | None = None) -> np.n
     returns: (4,) [nx, ny, nz, d], n_x >= 0
     """
     pts = _check_points(points)
-    w = np.ones(len(pts)) if weights is None else np.asarray(weights, float)
-    c = (pts * w[:, None]).sum(axis=0) / w.sum()
-    q = (pts - c) * np.sqrt(w)[:, None]
+    if weights is None:  # the weighted formulas with unit weights, without their passes over the points
+        c = pts.sum(axis=0) / len(pts)
+        q = pts - c
+    else:
+        w = np.asarray(weights, float)
+        c = (pts * w[:, None]).sum(axis=0) / w.sum()
+        q = (pts - c) * np.sqrt(w)[:, None]
     _, s, vt = np.linalg.svd(q, full_matrices=False)
     if s[1] < 1e-9 * max(s[0], 1e-300):
         raise ValueError("points are collinear: a plane is not determined")
@@ -63,19 +67,51 @@ def fit_plane_robust(points: np.ndarray, rng: np.random.Generator | None = None,
     good = norm > 1e-9
     n = n[good] / norm[good, None]
     d = np.einsum("ij,ij->i", n, tri[good, 0])
-    counts = (np.abs(sample @ n.T - d) < tol).sum(axis=0)
+    dist = sample @ n.T
+    dist -= d  # in place: the (2000, iterations) temporaries cost more than the arithmetic
+    counts = (np.abs(dist, out=dist) < tol).sum(axis=0)
     best = np.append(n[np.argmax(counts)], d[np.argmax(counts)]) if len(counts) else fit_plane_tls(pts)
     inl = np.abs(point_plane_distance(pts, best)) < tol
-    plane = best
+    # the inlier sets are chosen with planes from the scatter matrix (a few passes over the points instead
+    # of an SVD each); the plane returned is the exact TLS fit of the last set, as it always was
+    moments = _Moments(pts, sample.mean(axis=0))
+    used = inl
     for _ in range(4):
-        plane = fit_plane_tls(pts[inl])
+        used = inl
+        plane = moments.plane(inl)
+        if plane is None:  # too few or nearly collinear inliers: the exact fit decides (or raises)
+            plane = fit_plane_tls(pts[inl])
         r = point_plane_distance(pts, plane)
         sigma = 1.4826 * np.median(np.abs(r[inl])) + 1e-9
         new = np.abs(r) < max(3.5 * sigma, 1e-6)
         if (new == inl).all():
             break
         inl = new
-    return _orient(plane), inl
+    return fit_plane_tls(pts[used]), inl
+
+
+class _Moments:
+    """Plane fits of subsets of one point set from its first and second moments (about a point near
+    its centroid, so that little cancels): (3, 3) scatter matrix and its eigenvectors."""
+
+    def __init__(self, pts: np.ndarray, ref: np.ndarray):
+        self.ref = ref
+        self.t = np.ascontiguousarray((pts - ref).T)  # (3, N)
+
+    def plane(self, mask: np.ndarray) -> np.ndarray | None:
+        """[n, d] of the points where ``mask``; None when they are fewer than 3 or nearly collinear."""
+        w = mask.astype(np.float64)
+        count = w.sum()
+        if count < 3:
+            return None
+        tw = self.t * w
+        mean = tw.sum(axis=1) / count
+        scatter = tw @ self.t.T - count * np.outer(mean, mean)
+        ev, vec = np.linalg.eigh(scatter)
+        if not ev[1] > 1e-12 * ev[2]:  # singular values 1e-6 apart: let the SVD judge
+            return None
+        n = vec[:, 0]
+        return np.append(n, n @ (mean + self.ref))
 
 
 def fit_planes(groups: list[np.ndarray], method: str = "pencil") -> tuple[np.ndarray, list[np.ndarray]]:
