@@ -52,7 +52,8 @@ def isolate(points: np.ndarray, background: np.ndarray | None, params: BodyParam
 
     keep = np.isfinite(points).all(axis=1)
     if background is not None and len(background):
-        d = np.abs(points @ background[:, :3].T - background[:, 3]).min(axis=1)
+        d = np.abs(points @ background[:, :3].T - background[:, 3])
+        d = np.minimum.reduce(list(d.T)) if d.shape[1] > 1 else d[:, 0]  # faster than min(axis=1) over 2
         keep &= d > background_margin(d[keep], params)
     idx = np.nonzero(keep)[0]
     if len(idx) < params.min_group:
@@ -82,11 +83,29 @@ def _extent(points: np.ndarray, trim: float) -> tuple[float, np.ndarray]:
         c = np.median(points[keep], axis=0)
         _, _, vt = np.linalg.svd(points[keep] - c, full_matrices=False)
         t = (points - c) @ vt[0]
-        q1, q3 = np.quantile(t[keep], [0.25, 0.75])
+        q1, q3 = _quantiles(t[keep], (0.25, 0.75))
         keep = (t >= q1 - 1.5 * (q3 - q1)) & (t <= q3 + 1.5 * (q3 - q1))
-    lo, hi = np.quantile(t[keep], [trim, 1 - trim])
+    lo, hi = _quantiles(t[keep], (trim, 1 - trim))
     ends = np.array([c + lo * vt[0], c + hi * vt[0]])
     return float(hi - lo), ends
+
+
+def _quantiles(x: np.ndarray, qs: tuple[float, ...]) -> list[float]:
+    """np.quantile(x, qs) of a finite 1-D x with the same (linear) interpolation and arithmetic, without
+    its overhead: the measurement calls it thrice per stripe group."""
+    n = len(x)
+    where = [(n - 1) * q for q in qs]
+    kth = sorted({min(max(int(np.floor(v)) + j, 0), n - 1) for v in where for j in (0, 1)})
+    s = np.partition(x, kth)
+    out = []
+    for v in where:
+        if v >= n - 1 or v < 0:
+            out.append(float(s[-1] if v >= n - 1 else s[0]))
+            continue
+        i = int(np.floor(v))
+        a, b, t = float(s[i]), float(s[i + 1]), v - i
+        out.append(b - (b - a) * (1 - t) if t >= 0.5 else a + (b - a) * t)
+    return out
 
 
 def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
