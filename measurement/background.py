@@ -26,7 +26,7 @@ def background_planes(rays: np.ndarray, planes: np.ndarray, labels: np.ndarray, 
         cand = np.nonzero(rest)[0]
         if len(cand) < 200:
             break
-        plane, _ = fit_plane_robust(pts[cand], rng, iterations=300, inlier_mm=tol_mm / 2)
+        plane, _ = fit_plane_robust(pts[cand], rng, iterations=300, inlier_mm=tol_mm / 2, exact=False)
         near = np.abs(pts @ plane[:3] - plane[3]) < tol_mm
         if near[rest].sum() < 0.2 * len(idx):
             break
