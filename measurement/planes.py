@@ -75,14 +75,14 @@ def fit_plane_robust(points: np.ndarray, rng: np.random.Generator | None = None,
     best = np.append(n[np.argmax(counts)], d[np.argmax(counts)]) if len(counts) else fit_plane_tls(pts)
     inl = np.abs(point_plane_distance(pts, best)) < tol
     # the inlier sets are chosen with planes from the scatter matrix (a few passes over the points instead
-    # of an SVD each); the plane returned is the exact TLS fit of the last set, as it always was
+    # of an SVD each); with ``exact`` the plane returned is the TLS fit of the last set, as it always was
     moments = _Moments(pts, sample.mean(axis=0))
-    used = inl
+    used, plane = inl, best
     for _ in range(4):
         used = inl
-        plane = moments.plane(inl)
-        if plane is None:  # too few or nearly collinear inliers: the exact fit decides (or raises)
-            plane = fit_plane_tls(pts[inl])
+        quick = moments.plane(inl)
+        # too few or nearly collinear inliers: the exact fit decides (or raises)
+        plane = quick if quick is not None else fit_plane_tls(pts[inl])
         r = point_plane_distance(pts, plane)
         sigma = 1.4826 * np.median(np.abs(r[inl])) + 1e-9
         new = np.abs(r) < max(3.5 * sigma, 1e-6)
