@@ -58,10 +58,22 @@ def link_segments(c: Centres, link_px: float) -> np.ndarray:
 def _nearest_key(key: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Index (T,) of the entry of sorted ``key`` (K,) nearest each target (T,) (the lower of a tie),
     and the distance (T,)."""
-    hi = np.clip(np.searchsorted(key, target), 1, len(key) - 1)
+    hi = np.clip(_searchsorted_merge(key, target), 1, len(key) - 1)
     d_lo, d_hi = np.abs(key[hi - 1] - target), np.abs(key[hi] - target)
     upper = d_hi < d_lo
     return np.where(upper, hi, hi - 1), np.where(upper, d_hi, d_lo)
+
+
+def _searchsorted_merge(key: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """``np.searchsorted(key, target)`` (K,) sorted, (T,): when the targets are sorted too (link_segments'
+    are) by one stable merge of both (targets first, so a tie counts as not less), twice as fast as T
+    binary searches over a large key."""
+    if len(target) < 2 or not (target[1:] >= target[:-1]).all():
+        return np.searchsorted(key, target)
+    order = np.argsort(np.concatenate([target, key]), kind="stable")
+    pos = np.empty(len(order), np.int64)
+    pos[order] = np.arange(len(order))
+    return pos[:len(target)] - np.arange(len(target))
 
 
 def row_order(c: Centres) -> np.ndarray:
