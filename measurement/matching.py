@@ -32,7 +32,7 @@ from .background import (
     split_foreground,
 )
 from .detection import Centres
-from .offsets import conflict_curve, occlusion_offset, projector_right, sharp_minimum
+from .offsets import conflict_curve, lit_cells, occlusion_offset, projector_right, sharp_minimum
 from .segments import (
     denoise,
     link_segments,
@@ -197,6 +197,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     labelled[list(seg_label)] = True
     remaining = long_seg & ~labelled[seg]
     cl = _labels_of(seg, seg_label, long_seg)
+    lit = lit_cells(rays, planes, cl, np.nonzero(cl >= 0)[0])
     mid = n // 2
     biggest = 0
     placed_max = 0  # centres in the largest piece placed so far
@@ -224,7 +225,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         weighed[idx] = True
         rel = _relative(seg, trial, mid)
         off = occlusion_offset(rays, planes, cl, rel[seg], idx, n, projector_right(planes),
-                               beside_placed=len(idx) < placed_max)
+                               beside_placed=len(idx) < placed_max, lit=lit)
         if _TRACE is not None:
             _TRACE.append((idx, rel[seg[idx]], off))
         if off is None:
@@ -239,6 +240,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         # background for the pieces after it (a tail must not slide into the body's own shadow)
         placed = idx[inside]
         cl[placed] = lab[inside]
+        lit = np.union1d(lit, lit_cells(rays, planes, cl, placed))
         placed_max = max(placed_max, len(idx))
     return out, small
 
@@ -249,13 +251,14 @@ def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed) -> d
     its conflict curve); the others stay unlabelled."""
     out: dict[int, int] = {}
     cl = _labels_of(seg, seg_label, long_seg)
+    lit = lit_cells(rays, planes, cl, np.nonzero(cl >= 0)[0])
     mid = n // 2
     for idx, trial in small:
         if (cl[idx] >= 0).any():
             continue
         weighed[idx] = True
         rel = _relative(seg, trial, mid)
-        curve = conflict_curve(rays, planes, cl, rel[seg], idx, n)
+        curve = conflict_curve(rays, planes, cl, rel[seg], idx, n, lit=lit)
         off = sharp_minimum(*curve) if curve is not None else None
         if _TRACE is not None:
             _TRACE.append((idx, rel[seg[idx]], off))
@@ -265,6 +268,7 @@ def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed) -> d
         inside = (lab >= 0) & (lab < n)
         out.update(_placed(trial, rel, off, n))
         cl[idx[inside]] = lab[inside]
+        lit = np.union1d(lit, lit_cells(rays, planes, cl, idx[inside]))
     return out
 
 

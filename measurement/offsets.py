@@ -55,7 +55,8 @@ def _in_sorted(x: np.ndarray, sorted_values: np.ndarray) -> np.ndarray:
 
 
 def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, bins: float = 0.002,
-                      residue: float = 0.5, pattern_edge: float = 0.02, beside_placed: bool = False) -> int | None:
+                      residue: float = 0.5, pattern_edge: float = 0.02, beside_placed: bool = False,
+                      lit: np.ndarray | None = None) -> int | None:
     """Absolute offset of a cluster with relative labels ``r[idx]``, from the projector's point of view.
 
     A background point lit by stripe k at projector elevation e proves that nothing stood in front of it
@@ -73,22 +74,32 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
     first piece: there the conflict residue of stray centres at the outline often sits on the right
     offset and makes the next one up the minimum.
     """
-    curve = conflict_curve(rays, planes, cl, r, idx, n, bins)
+    curve = conflict_curve(rays, planes, cl, r, idx, n, bins, lit)
     if curve is None:
         return None
     return choose_offset(*curve, projector_right, pattern_edge, beside_placed, residue)
 
 
-def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002
+def lit_cells(rays, planes, labels, which, bins: float = 0.002) -> np.ndarray:
+    """Sorted keys (stripe * 1e6 + elevation bin) of the projector cells lit at the centres ``which``
+    (indices) with stripe ``labels[which]``."""
+    if len(which) == 0:
+        return np.zeros(0, np.int64)
+    p = intersect(rays[which], planes[labels[which]])
+    e = np.floor(projector_elevation(p, planes) / bins).astype(np.int64)
+    return np.unique(labels[which] * 1_000_000 + e)
+
+
+def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.ndarray | None = None
                    ) -> tuple[dict[int, float], dict[int, tuple[float, float]]] | None:
     """Per offset: the share of the piece's cells that land on deep-lit cells, and the shares of the
-    piece pushed before the first and past the last stripe; None without enough lit background."""
+    piece pushed before the first and past the last stripe; None without enough lit background.
+    ``lit`` : the cells lit at every labelled centre of ``cl`` (``lit_cells``), if already known."""
     bg = np.nonzero(cl >= 0)[0]
     if len(bg) < 100:
         return None
-    pb = intersect(rays[bg], planes[cl[bg]])
-    eb = np.floor(projector_elevation(pb, planes) / bins).astype(np.int64)
-    lit = np.unique(cl[bg] * 1_000_000 + eb)  # sorted
+    if lit is None:
+        lit = lit_cells(rays, planes, cl, bg, bins)
     deep = lit[_in_sorted(lit - 2, lit) & _in_sorted(lit + 2, lit) & _in_sorted(lit - 1, lit)
                & _in_sorted(lit + 1, lit)]  # sorted too
     rr = r[idx]
