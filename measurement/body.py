@@ -50,7 +50,7 @@ def isolate(points: np.ndarray, background: np.ndarray | None, params: BodyParam
     largest cluster of points connected through occupied voxels of ``cluster_mm`` (26-neighbourhood)."""
     from scipy import ndimage
 
-    keep = np.isfinite(points).all(axis=1)
+    keep = np.isfinite(points[:, 0]) & np.isfinite(points[:, 1]) & np.isfinite(points[:, 2])
     if background is not None and len(background):
         d = np.abs(points @ background[:, :3].T - background[:, 3])
         d = np.minimum.reduce(list(d.T)) if d.shape[1] > 1 else d[:, 0]  # faster than min(axis=1) over 2
@@ -122,7 +122,11 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
     out["body_length_mm"] = None
     if not groups:
         return out
-    extents = [(*_extent(points[stripe == k], params.trim), k) for k in groups]
+    # each group's points in their original order (one stable sort instead of a mask per group)
+    order = np.argsort(stripe, kind="stable")
+    ks_sorted, ks_arr = stripe[order], np.array(groups)
+    first, last = np.searchsorted(ks_sorted, ks_arr), np.searchsorted(ks_sorted, ks_arr, side="right")
+    extents = [(*_extent(points[order[a:b]], params.trim), k) for k, a, b in zip(groups, first, last, strict=True)]
     ext, ends, k_best = max(extents, key=lambda e: e[0])
     name = "body_width" if view == "top" else "body_height"
     out["body_height_mm"] = round(ext, 2)
