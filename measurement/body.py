@@ -84,7 +84,10 @@ def _extent(points: np.ndarray, trim: float) -> tuple[float, np.ndarray]:
         _, _, vt = np.linalg.svd(points[keep] - c, full_matrices=False)
         t = (points - c) @ vt[0]
         q1, q3 = _quantiles(t[keep], (0.25, 0.75))
-        keep = (t >= q1 - 1.5 * (q3 - q1)) & (t <= q3 + 1.5 * (q3 - q1))
+        fenced = (t >= q1 - 1.5 * (q3 - q1)) & (t <= q3 + 1.5 * (q3 - q1))
+        if (fenced == keep).all():  # nothing dropped: another pass would repeat this one exactly
+            break
+        keep = fenced
     lo, hi = _quantiles(t[keep], (trim, 1 - trim))
     ends = np.array([c + lo * vt[0], c + hi * vt[0]])
     return float(hi - lo), ends
