@@ -125,3 +125,13 @@ def test_a_scan_says_when_the_animal_could_not_be_placed(small_capture, monkeypa
     assert r.measurements["unplaced_share"] == 1.0
     assert r.measurements["body_height_mm"] is None
     assert any("could not be matched to a light plane" in w for w in r.measurements["warnings"])
+
+
+def test_sixteen_bit_and_colour_frames_scan_as_their_eight_bit_gray(small_capture, truth_cal):
+    """A 16-bit camera frame (the same light, x257) or a 3-channel one gives the same cloud."""
+    img = read_image(small_capture / "scan" / "side.png")
+    gray = scan(img, truth_cal, "side")
+    for other in (img.astype(np.uint16) * 257, np.dstack([img] * 3)):
+        r = scan(other, truth_cal, "side")
+        np.testing.assert_array_equal(r.stripe, gray.stripe)
+        np.testing.assert_allclose(r.points, gray.points)
