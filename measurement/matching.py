@@ -236,11 +236,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         if inside.mean() < 0.8 or np.mean((z > zrange[0]) & (z < zrange[1])) < 0.9:
             continue
         out.update(_placed(trial, rel, off, n))
-        # a projector ray lights one surface only: the cells of a labelled piece are as good as lit
-        # background for the pieces after it (a tail must not slide into the body's own shadow)
-        placed = idx[inside]
-        cl[placed] = lab[inside]
-        lit = np.union1d(lit, lit_cells(rays, planes, cl, placed))
+        lit = _claim(rays, planes, cl, lit, idx, lab)
         placed_max = max(placed_max, len(idx))
     return out, small
 
@@ -264,12 +260,19 @@ def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed) -> d
             _TRACE.append((idx, rel[seg[idx]], off))
         if off is None:
             continue
-        lab = rel[seg[idx]] + off
-        inside = (lab >= 0) & (lab < n)
         out.update(_placed(trial, rel, off, n))
-        cl[idx[inside]] = lab[inside]
-        lit = np.union1d(lit, lit_cells(rays, planes, cl, idx[inside]))
+        lit = _claim(rays, planes, cl, lit, idx, rel[seg[idx]] + off)
     return out
+
+
+def _claim(rays, planes, cl, lit, idx, lab) -> np.ndarray:
+    """Write a placed piece's labels ``lab`` (for centres ``idx``) into ``cl`` where they land on a
+    stripe, and return ``lit`` with the piece's cells added: a projector ray lights one surface only, so
+    they are as good as lit background for the pieces after it (a tail must not slide into the body's
+    own shadow)."""
+    inside = (lab >= 0) & (lab < len(planes))
+    cl[idx[inside]] = lab[inside]
+    return np.union1d(lit, lit_cells(rays, planes, cl, idx[inside]))
 
 
 def _relative(seg: np.ndarray, trial: dict[int, int], mid: int) -> np.ndarray:

@@ -122,7 +122,8 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
         conflicts[off] = float(_in_sorted(cells, deep).mean())
     if not conflicts:
         return None
-    _log.debug("occlusion conflicts %s", sorted(conflicts.items()))
+    if _log.isEnabledFor(logging.DEBUG):
+        _log.debug("occlusion conflicts %s", sorted(conflicts.items()))
     return conflicts, beyond
 
 
@@ -177,13 +178,12 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
     return int(best)
 
 
-
 def sharp_minimum(conflicts: dict[int, float], beyond: dict[int, tuple[float, float]]) -> int | None:
     """The offset at the bottom of a V: conflicts (plus the share pushed past the pattern) rise on both
     sides within two stripes. A piece whose every neighbouring cell is lit or taken by an already placed
     piece (a tail beside the body, a leg in front of the wall) shows this shape, and its bottom is the
     answer; a one-sided curve (a flat conflict-free run toward cells the camera cannot see) is left to
-    the knee."""
+    ``choose_offset``'s ramp reading."""
 
     def cost(o: int) -> float:
         return conflicts.get(o, 1.0) + sum(beyond.get(o, (1.0, 0.0)))

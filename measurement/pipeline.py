@@ -16,7 +16,7 @@ from .body import BodyParams, isolate, measure
 from .calibration import Calibration
 from .detection import DetectionParams, check_image, detect_centres, reliable
 from .errors import ScanError
-from .matching import MatchingParams, denoise, label_centres, smooth_along_segments
+from .matching import Labels, MatchingParams, denoise, label_centres, smooth_along_segments
 from .triangulation import intersect, ray_table, rays_at
 
 VIEWS = ("side", "top", "front", "back")
@@ -98,7 +98,7 @@ def scan(image: np.ndarray, calibration: Calibration, view: str = "side", ambien
     return ScanResult(pts[animal], stripe[animal], uv[animal], pts, stripe, uv, meas, timings)
 
 
-def _warnings(meas: dict, labels) -> list[str]:
+def _warnings(meas: dict, labels: Labels) -> list[str]:
     """What a technician should know before trusting the numbers."""
     out = []
     if labels.pieces and labels.unplaced > 0.3 * labels.pieces:
