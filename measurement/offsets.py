@@ -104,27 +104,45 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
                & _in_sorted(lit + 1, lit)]  # sorted too
     rr = r[idx]
     sub = idx if len(idx) <= 20000 else idx[:: len(idx) // 20000 + 1]
-    rs = r[sub]
-    rays_sub = rays[sub]
-    centre = projector_centre(planes)
+    offs = np.arange(-int(rr.max()), n - int(rr.min()))
+    k = r[sub][None, :] + offs[:, None]  # (O, S) the stripe of each centre at each offset
+    inside = (k >= 0) & (k < n)
+    # share of the piece that an offset pushes past the first (< 0) or last (>= n) stripe
+    before, past = (k < 0).mean(axis=1), (k >= n).mean(axis=1)
+    beyond = {int(o): (float(b), float(a)) for o, b, a in zip(offs, before, past, strict=True)}
+    weighed = inside.mean(axis=1) >= 0.8
+    at, i = np.nonzero(inside & weighed[:, None])
+    # every offset's points at once (row by row the numbers of one offset at a time)
+    p = intersect(rays[sub[i]], planes[k[at, i]])
     _, axis = pencil_axis(planes)
-    conflicts = {}
-    beyond = {}  # share of the piece that an offset pushes past the first (< 0) or last (>= n) stripe
-    for off in range(-int(rr.max()), n - int(rr.min())):
-        k = rs + off
-        inside = (k >= 0) & (k < n)
-        beyond[off] = (float(np.mean(k < 0)), float(np.mean(k >= n)))
-        if inside.mean() < 0.8:
-            continue
-        p = intersect(rays_sub[inside], planes[k[inside]])
-        e = np.floor(_elevation(p, centre, axis) / bins).astype(np.int64)
-        cells = np.unique(k[inside] * 1_000_000 + e)
-        conflicts[off] = float(_in_sorted(cells, deep).mean())
+    e = np.floor(_elevation(p, projector_centre(planes), axis) / bins).astype(np.int64)
+    cells, hits = _distinct_cells(at, k[at, i], e, len(offs), n, deep)
+    conflicts = {int(o): float(hits[j] / cells[j]) for j, o in enumerate(offs) if weighed[j]}
     if not conflicts:
         return None
     if _log.isEnabledFor(logging.DEBUG):
         _log.debug("occlusion conflicts %s", sorted(conflicts.items()))
     return conflicts, beyond
+
+
+def _distinct_cells(group: np.ndarray, stripe: np.ndarray, e: np.ndarray, groups: int, n: int,
+                    deep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per group (groups,): the number of distinct cells (stripe * 1e6 + elevation bin) among the
+    entries (K,) of that group, and how many of them are in the sorted keys ``deep``."""
+    lo, hi = (int(e.min()), int(e.max())) if len(e) else (0, 0)
+    bins = hi - lo + 1
+    if lo > -400_000 and hi < 400_000 and groups * n * bins <= 20_000_000:  # a bitmap, no sort
+        mark = np.zeros((groups, n * bins), bool)
+        mark[group, stripe * bins + (e - lo)] = True
+        dk = (deep + 500_000) // 1_000_000  # keys of bins within +-5e5 split back into stripe and bin
+        de = deep - dk * 1_000_000 - lo
+        use = (dk >= 0) & (dk < n) & (de >= 0) & (de < bins)
+        in_deep = np.zeros(n * bins, bool)
+        in_deep[dk[use] * bins + de[use]] = True
+        return np.count_nonzero(mark, axis=1), np.count_nonzero(mark & in_deep, axis=1)
+    both = np.unique(np.column_stack([group, stripe * 1_000_000 + e]), axis=0)
+    hits = np.bincount(both[:, 0], weights=_in_sorted(both[:, 1], deep), minlength=groups)
+    return np.bincount(both[:, 0], minlength=groups), hits.astype(np.int64)
 
 
 def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, float]], projector_right: bool = True,
