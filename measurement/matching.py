@@ -160,8 +160,8 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
         seg_label.update(claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, depth=z_all))
     # 4: foreground clusters: relative labels by growing from a seed, offset from the shadow they cast
     weighed = np.zeros(m, bool)
-    fg_labels, small = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all,
-                                   weighed, params.depth_range_mm)
+    fg_labels, small, cl, lit = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n,
+                                            z_all, weighed, params.depth_range_mm)
     if fg_labels:
         # pieces of the animal without shadow evidence of their own continue a labelled piece's surface
         is_bg = np.zeros(seg.max() + 1, bool)
@@ -173,7 +173,7 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
                   gaps=(1,), min_share=0.8)
     seg_label.update(fg_labels)
     if fg_labels and small:  # isolated small pieces (a head seen from above) hemmed in by what is placed
-        seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed))
+        seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit))
     labels = _labels_of(seg, seg_label, long_seg)
     ok = labels >= 0
     zmin, zmax = params.depth_range_mm
@@ -184,9 +184,10 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
 
 
 def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, weighed, zrange
-                ) -> tuple[dict[int, int], list]:
+                ) -> tuple[dict[int, int], list, np.ndarray, np.ndarray]:
     """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
-    (M,) the centres of every piece that was weighed for an offset.
+    (M,) the centres of every piece that was weighed for an offset. Also returns the per-centre labels
+    (M,) of the background and the placed pieces, and the projector cells they light (``lit_cells``).
 
     Each piece gets relative indices by depth continuity from a seed (the longest segment left) and is
     placed from its conflict curve, with the pieces placed before it counting as lit; pieces under
@@ -238,16 +239,18 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         out.update(_placed(trial, rel, off, n))
         lit = _claim(rays, planes, cl, lit, idx, lab)
         placed_max = max(placed_max, len(idx))
-    return out, small
+    return out, small, cl, lit
 
 
-def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed) -> dict[int, int]:
+def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, known, lit) -> dict[int, int]:
     """Labels for the small pieces that growth from their neighbours did not reach: each is placed only
     where the background and the pieces already labelled hem it in on both sides (the bottom of a V in
-    its conflict curve); the others stay unlabelled."""
+    its conflict curve); the others stay unlabelled. ``known`` (M,) labels (a subset of ``seg_label``'s)
+    whose cells ``lit`` holds."""
     out: dict[int, int] = {}
     cl = _labels_of(seg, seg_label, long_seg)
-    lit = lit_cells(rays, planes, cl, np.nonzero(cl >= 0)[0])
+    # labels only join seg_label, never change: the centres labelled since add their cells
+    lit = np.union1d(lit, lit_cells(rays, planes, cl, np.flatnonzero((cl >= 0) & (cl != known))))
     mid = n // 2
     for idx, trial in small:
         if (cl[idx] >= 0).any():
