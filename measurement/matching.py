@@ -305,8 +305,8 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
     """Grow labels along continuous surfaces until nothing changes; returns per-centre labels.
     With ``bg_planes`` a segment only joins when its points then lie on those planes; with
     ``avoid_planes`` only when they do not."""
-    pairs = _neighbour_pairs(seg, long_seg, left, right)
     table = _label_table(seg, seg_label)
+    pairs = _open_pairs(_neighbour_pairs(seg, long_seg, left, right), table)
     active = None
     for _ in range(40):
         new = _votes(rays, planes, table, pairs, tol_mm, n, depth_only, False, min_share, gaps, active)
@@ -321,6 +321,7 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
         seg_label.update(new)
         grown = np.fromiter(new.keys(), np.int64, len(new))
         table[grown] = np.fromiter(new.values(), np.int64, len(new))
+        pairs = _open_pairs(pairs, table)
         # only segments beside a newly labelled one can vote differently next round; the others would
         # repeat this round's outcome (no label, or one the plane test refused)
         newly = np.zeros(len(table), bool)
@@ -361,6 +362,15 @@ def _neighbour_pairs(seg, mask, left, right) -> _Pairs:
         other = seg[nbr]
         keep = other != own
         out.append((idx[keep], nbr[keep], sign, own[keep], other[keep]))
+    return out
+
+
+def _open_pairs(pairs: _Pairs, table: np.ndarray) -> _Pairs:
+    """The ``pairs`` whose own segment has no label in ``table`` (S,) yet: only those can vote in growth."""
+    out = []
+    for idx, nbr, sign, own_seg, nb_seg in pairs:
+        keep = table[own_seg] < 0
+        out.append((idx[keep], nbr[keep], sign, own_seg[keep], nb_seg[keep]))
     return out
 
 
