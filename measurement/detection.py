@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -29,7 +29,9 @@ class DetectionParams:
 
     background_px : width of the minimum filter giving the local background (about half a stripe period)
     peak_px       : half-width of the non-maximum suppression along the row
-    min_contrast  : a centre stands at least this many gray levels above its local background
+    min_contrast  : a centre stands at least this many gray levels above its local background, and at least
+                    noise_k times the image's noise (``noise_sigma``): a noisy sensor must not turn its noise
+                    into stripes
     weak_contrast, link_px : hysteresis: a weaker peak (above weak_contrast, two-sided: see min_flank) is a
                     centre too when a chain of such peaks, each within link_px columns of one in the next
                     or next-but-one row, reaches a centre above min_contrast. Recovers the faint ends of a
@@ -47,6 +49,7 @@ class DetectionParams:
     background_px: int = 17
     peak_px: int = 4
     min_contrast: float = 8.0
+    noise_k: float = 2.5
     weak_contrast: float = 0.0
     link_px: float = 2.0
     sigma_x: float = 1.0
@@ -115,6 +118,7 @@ def detect_centres(image: np.ndarray, params: DetectionParams = DetectionParams(
         if a.shape != g.shape:
             raise ImageError(f"ambient image is {a.shape[1]}x{a.shape[0]}, the stripe image {g.shape[1]}x{g.shape[0]}")
         g = cv2.subtract(g, a)
+    params = replace(params, min_contrast=max(params.min_contrast, params.noise_k * noise_sigma(g)))
     # the frame is filtered in bands of rows (each with enough rows above and below for the vertical blur),
     # so the filters' images stay in cache, and the bands share the cores (OpenCV and NumPy release the
     # GIL): the same centres to the bit
@@ -133,6 +137,18 @@ def detect_centres(image: np.ndarray, params: DetectionParams = DetectionParams(
 
 _BAND_ROWS = 256
 _WORKERS = min(4, os.cpu_count() or 1)
+
+
+def noise_sigma(g: np.ndarray) -> float:
+    """Sensor noise of a gray image (H, W) uint8, gray levels (sigma): the median absolute difference of
+    vertically adjacent pixels on a sparse grid (every 8th row pair, every 4th column). The stripes run down
+    the image, so these differences are mostly noise; the median ignores the outlines."""
+    h = g.shape[0]
+    if h < 2:
+        return 0.0
+    rows = np.arange(0, h - 1, 8)
+    d = g[rows + 1, ::4].astype(np.int16) - g[rows, ::4]
+    return float(np.median(np.abs(d))) / (0.6745 * np.sqrt(2.0))
 
 
 def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams

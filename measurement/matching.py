@@ -46,6 +46,7 @@ from .triangulation import depth_for_labels, depth_on, intersect
 __all__ = ["Labels", "MatchingParams", "denoise", "label_centres", "link_segments", "smooth_along_segments"]
 GAP_PENALTY_MM = 8.0
 SMALL_PIECE = 0.25  # pieces under this share of the largest are left to growth from their neighbours
+SMALL_FLOOR = 0.05  # largest share of a small piece's cells that may conflict at its chosen offset
 _TRACE: list | None = None  # tests and benchmarks may collect the foreground clusters here
 
 
@@ -170,7 +171,7 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
         if bg_planes is not None:  # leave alone what some index would put on the floor or wall
             fg_mask &= ~background_like(rays, planes, seg, fg_mask, bg_planes, set(fg_labels), depth=z_all)
         _grow_all(c, rays, planes, seg, fg_labels, fg_mask, left, right, tol, n, None, depth_only=True,
-                  gaps=(1,), min_share=0.8)
+                  gaps=(1,), min_share=0.8, slope=True)
     seg_label.update(fg_labels)
     if fg_labels and small:  # isolated small pieces (a head seen from above) hemmed in by what is placed
         seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit))
@@ -258,7 +259,8 @@ def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, know
         weighed[idx] = True
         rel = _relative(seg, trial, mid)
         curve = conflict_curve(rays, planes, cl, rel[seg], idx, n, lit=lit)
-        off = sharp_minimum(*curve) if curve is not None else None
+        # a small piece has few cells to conflict with: a bottom with conflicts is a piece mislinked
+        off = sharp_minimum(*curve, max_floor=SMALL_FLOOR) if curve is not None else None
         if _TRACE is not None:
             _TRACE.append((idx, rel[seg[idx]], off))
         if off is None:
@@ -301,15 +303,16 @@ def _labels_of(seg: np.ndarray, seg_label: dict[int, int], long_seg: np.ndarray)
 
 
 def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, bg_planes=None,
-              depth_only=False, avoid_planes=None, gaps=(1, 2, 3), min_share=0.6) -> np.ndarray:
+              depth_only=False, avoid_planes=None, gaps=(1, 2, 3), min_share=0.6, slope=False) -> np.ndarray:
     """Grow labels along continuous surfaces until nothing changes; returns per-centre labels.
     With ``bg_planes`` a segment only joins when its points then lie on those planes; with
-    ``avoid_planes`` only when they do not."""
+    ``avoid_planes`` only when they do not. With ``slope`` (depth only) the neighbour's depth is
+    extrapolated by its own step from the stripe beyond it, so a steep surface keeps growing."""
     table = _label_table(seg, seg_label)
     pairs = _open_pairs(_neighbour_pairs(seg, long_seg, left, right), table)
     active = None
     for _ in range(40):
-        new = _votes(rays, planes, table, pairs, tol_mm, n, depth_only, False, min_share, gaps, active)
+        new = _votes(rays, planes, table, pairs, tol_mm, n, depth_only, False, min_share, gaps, active, slope)
         if bg_planes is not None and new:
             on = segments_on_planes(rays, planes, seg, new, bg_planes)
             new = {s: k for s, k in new.items() if s in on}
@@ -327,7 +330,7 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
         newly = np.zeros(len(table), bool)
         newly[grown] = True
         active = np.zeros(len(table), bool)
-        for _, _, _, own_seg, nb_seg in pairs:
+        for _, _, _, own_seg, nb_seg, _, _ in pairs:
             active[own_seg[newly[nb_seg]]] = True
     return _labels_of(seg, seg_label, long_seg)
 
@@ -345,13 +348,13 @@ def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
     return float(np.median(np.linalg.norm(a - b, axis=1)))
 
 
-_Pairs = list[tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray]]
+_Pairs = list[tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
 
 
 def _neighbour_pairs(seg, mask, left, right) -> _Pairs:
     """Per side (left, then right): the centres (K,) in ``mask`` whose row neighbour on that side lies in
-    another segment, that neighbour (K,), the sign of the label step toward the centre, and the
-    segments (K,) of both."""
+    another segment, that neighbour (K,), the sign of the label step toward the centre, the segments
+    (K,) of both, and the neighbour's own neighbour further out (K,) with its segment (-1 where none)."""
     out = []
     members = np.flatnonzero(mask)
     own_all = seg[members]
@@ -361,16 +364,19 @@ def _neighbour_pairs(seg, mask, left, right) -> _Pairs:
         idx, nbr, own = members[has], nbr[has], own_all[has]
         other = seg[nbr]
         keep = other != own
-        out.append((idx[keep], nbr[keep], sign, own[keep], other[keep]))
+        idx, nbr, own, other = idx[keep], nbr[keep], own[keep], other[keep]
+        far = nb[nbr]
+        far_seg = np.where(far >= 0, seg[np.maximum(far, 0)], -1)
+        out.append((idx, nbr, sign, own, other, far, far_seg))
     return out
 
 
 def _open_pairs(pairs: _Pairs, table: np.ndarray) -> _Pairs:
     """The ``pairs`` whose own segment has no label in ``table`` (S,) yet: only those can vote in growth."""
     out = []
-    for idx, nbr, sign, own_seg, nb_seg in pairs:
+    for idx, nbr, sign, own_seg, nb_seg, far, far_seg in pairs:
         keep = table[own_seg] < 0
-        out.append((idx[keep], nbr[keep], sign, own_seg[keep], nb_seg[keep]))
+        out.append((idx[keep], nbr[keep], sign, own_seg[keep], nb_seg[keep], far[keep], far_seg[keep]))
     return out
 
 
@@ -391,21 +397,34 @@ def _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, dep
 
 
 def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, min_share, gaps,
-           active: np.ndarray | None = None) -> dict[int, int]:
+           active: np.ndarray | None = None, slope: bool = False) -> dict[int, int]:
     """One round of ``_grow`` on label ``table`` (S,) and neighbour ``pairs``, for the segments flagged in
     ``active`` (S,) (all when None)."""
     voters, votes = [], []
-    for idx, nbr, sign, own_seg, nb_seg in pairs:
+    for idx, nbr, sign, own_seg, nb_seg, far, far_seg in pairs:
         if active is not None:  # the few pairs of active segments first, in their order
             at = np.flatnonzero(active[own_seg])
-            idx, nbr, own_seg, nb_seg = idx[at], nbr[at], own_seg[at], nb_seg[at]
+            idx, nbr, own_seg, nb_seg, far, far_seg = idx[at], nbr[at], own_seg[at], nb_seg[at], far[at], far_seg[at]
         own, kn = table[own_seg], table[nb_seg]
         take = ((own >= 0) if relabel else (own < 0)) & (kn >= 0)
-        idx, nbr, kn, voter = idx[take], nbr[take], kn[take], own_seg[take]
+        idx, nbr, kn, voter, far, far_seg = idx[take], nbr[take], kn[take], own_seg[take], far[take], far_seg[take]
         if len(idx) == 0:
             continue
         if depth_only:
             zn = depth_on(rays[nbr], planes[kn])
+            if slope:
+                # a steep surface (a tail hanging toward its tip) changes depth by a similar step from stripe
+                # to stripe: extrapolate the neighbour's own step where its outer neighbour is the next stripe
+                kf = np.where(far_seg >= 0, table[np.maximum(far_seg, 0)], -1)
+                has = (kf == kn - sign) & (kf >= 0)
+                step = np.zeros(len(idx))
+                if has.any():
+                    zf = depth_on(rays[far[has]], planes[kf[has]])
+                    # only where the stripes are evenly spaced in the image too (no stripes missing between)
+                    near_dx = np.abs(rays[idx[has], 0] - rays[nbr[has], 0])
+                    far_dx = np.abs(rays[nbr[has], 0] - rays[far[has], 0])
+                    even = (near_dx < 1.3 * far_dx) & (far_dx < 1.3 * near_dx)
+                    step[has] = np.where((np.abs(zn[has] - zf) < 2 * tol_mm) & even, zn[has] - zf, 0.0)
         else:
             pn = intersect(rays[nbr], planes[kn])
         # the voters' points on the planes of every gap at once (row by row as one gap at a time)
@@ -424,7 +443,7 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
             if depth_only:
                 # on a curved body, depth continuity separates a right index (median 3 mm on the simulated
                 # fox, 99 % under 36) from a wrong one (a whole depth step, 35-75 mm) better than 3-D gaps
-                d = np.abs(z_gap[g] - zn)
+                d = np.abs(z_gap[g] - (zn + step * gap if slope else zn))
                 # a missing stripe is the rarer event: a wider gap must fit clearly better to win (a
                 # steep flank seen from above makes the right gap of one look discontinuous)
                 d = d + (gap - 1) * GAP_PENALTY_MM

@@ -196,18 +196,22 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
     return int(best)
 
 
-def sharp_minimum(conflicts: dict[int, float], beyond: dict[int, tuple[float, float]]) -> int | None:
+def sharp_minimum(conflicts: dict[int, float], beyond: dict[int, tuple[float, float]],
+                  max_floor: float = 1.0) -> int | None:
     """The offset at the bottom of a V: conflicts (plus the share pushed past the pattern) rise on both
     sides within two stripes. A piece whose every neighbouring cell is lit or taken by an already placed
     piece (a tail beside the body, a leg in front of the wall) shows this shape, and its bottom is the
     answer; a one-sided curve (a flat conflict-free run toward cells the camera cannot see) is left to
-    ``choose_offset``'s ramp reading."""
+    ``choose_offset``'s ramp reading. A bottom above ``max_floor`` is no answer: the piece conflicts
+    wherever it goes, so its relative indices do not describe one surface."""
 
     def cost(o: int) -> float:
         return conflicts.get(o, 1.0) + sum(beyond.get(o, (1.0, 0.0)))
 
     best = min(conflicts, key=cost)
     floor = cost(best)
+    if floor > max_floor:
+        return None
     need = max(2 * floor, floor + 0.02)
     rises_low = max(cost(best - 1), cost(best - 2)) >= need
     rises_high = max(cost(best + 1), cost(best + 2)) >= need

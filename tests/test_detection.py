@@ -129,3 +129,32 @@ def test_blank_saturated_and_wrong_size_images_are_refused():
         check_image(np.full((200, 300), 255, np.uint8), (300, 200))
     with pytest.raises(ImageError, match="calibration is for"):
         check_image(np.zeros((200, 300), np.uint8), (3072, 2048))
+
+
+def _noisy_stripes(noise: float, seed: int = 0) -> np.ndarray:
+    """A 200 x 1536 frame of 40 Gaussian stripes (sigma 1.5 px, 35 gray levels over 40) plus sensor noise."""
+    x = np.arange(1536, dtype=float)
+    centres = 100 + 33.0 * np.arange(40)
+    row = 40 + 35 * np.exp(-0.5 * ((x[:, None] - centres[None, :]) / 1.5) ** 2).sum(axis=1)
+    rng = np.random.default_rng(seed)
+    return np.clip(np.rint(row[None, :] + rng.normal(0, noise, (200, 1536))), 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("noise", [2.0, 5.0, 9.0])
+def test_noise_sigma_reads_the_sensor_noise(noise):
+    from measurement.detection import noise_sigma, to_gray8
+
+    est = noise_sigma(to_gray8(_noisy_stripes(noise)))
+    assert abs(est - noise) < 0.25 * noise + 0.6  # the integer median steps by about 1 gray level
+
+
+def test_a_noisy_sensor_does_not_turn_its_noise_into_stripes():
+    """At 9 gray levels of noise a fixed 8-level contrast threshold finds hundreds of peaks per row; the
+    threshold that follows the noise finds the 40 stripes."""
+    img = _noisy_stripes(9.0)
+    fixed = detect_centres(img, DetectionParams(noise_k=0.0))
+    adaptive = detect_centres(img)
+    per_row = np.bincount(np.bincount(adaptive.v)).argmax()
+    assert len(fixed) / 200 > 80
+    assert per_row == 40
+    assert abs(len(adaptive) / 200 - 40) < 2

@@ -57,3 +57,45 @@ def test_our_labels_beat_the_paper_on_the_animal(small_capture, side):
 
     assert right(ours) > 0.97
     assert right(paper) < right(ours)  # image continuity carries the wall's indices into the body
+
+
+def _steep_ramp(slope: float, stripes: range, rows: np.ndarray):
+    """Exact centres of the reference rig's stripes on a surface z = 1100 + slope * x (mm), one segment per
+    stripe: rays (M, 3), segment ids, row neighbours and true labels."""
+    from measurement.simulate.rig import default_rig
+
+    planes = default_rig((1536, 1024), 40).projector.planes_cam()
+    rays, seg, lab, v = [], [], [], []
+    for s, k in enumerate(stripes):
+        n, d = planes[k, :3], planes[k, 3]
+        y = rows.astype(float)
+        x = (d - n[1] * y - n[2] * 1100.0) / (n[0] + n[2] * slope)
+        p = np.column_stack([x, y, 1100.0 + slope * x])
+        rays.append(p / p[:, 2:3]), seg.append(np.full(len(y), s)), lab.append(np.full(len(y), k)), v.append(rows)
+    rays, seg, lab, v = np.vstack(rays), np.concatenate(seg), np.concatenate(lab), np.concatenate(v)
+    order = np.lexsort((rays[:, 0], v))
+    rays, seg, lab, v = rays[order], seg[order], lab[order], v[order]
+    left = np.where(np.r_[False, v[1:] == v[:-1]], np.arange(len(v)) - 1, -1)
+    right = np.where(np.r_[v[:-1] == v[1:], False], np.arange(len(v)) + 1, -1)
+    return planes, rays, seg, left, right, lab
+
+
+def test_growth_follows_a_steep_surface_by_its_depth_step():
+    """A tail hanging toward its tip changes depth by more than the continuity tolerance from stripe to
+    stripe; extrapolating the neighbour's own step (where the stripes are evenly spaced) still labels it,
+    and never with a wrong index."""
+    from measurement.matching import _grow_all
+
+    planes, rays, seg, left, right, lab = _steep_ramp(-1.2, range(10, 16), np.arange(-40, 40, 2))
+    from measurement.triangulation import depth_on
+
+    step = np.abs(np.diff([depth_on(rays[lab == k][:1], planes[k:k + 1])[0] for k in range(10, 16)]))
+    tol = 0.8 * float(step.min())  # every step (29 mm down to 24 mm) exceeds the tolerance
+    long_seg = np.ones(len(seg), bool)
+    for slope, expect_all in ((False, False), (True, True)):
+        seg_label = {0: 10, 1: 11}  # the two stripes nearest the body are labelled
+        out = _grow_all(None, rays, planes, seg, seg_label, long_seg, left, right, tol, 40, None,
+                        depth_only=True, gaps=(1,), min_share=0.8, slope=slope)
+        got = out >= 0
+        assert (out[got] == lab[got]).all()
+        assert got.all() == expect_all

@@ -97,3 +97,15 @@ def test_a_piece_with_play_between_its_conflicts_and_the_pattern_edge_is_refused
 
     assert choose_offset(*curve(21)) == 20
     assert choose_offset(*curve(24)) is None
+
+
+def test_a_small_piece_that_conflicts_wherever_it_goes_is_not_placed():
+    """A V whose bottom still puts a tenth of the piece on lit cells is a piece whose relative indices
+    are wrong (a mislinked stub at the pattern's edge): ``max_floor`` refuses it."""
+    from measurement.offsets import sharp_minimum
+
+    no_edge = {o: (0.0, 0.0) for o in range(25, 36)}
+    v_with_residue = {27: 0.47, 28: 0.16, 29: 0.09, 30: 0.09, 31: 0.28, 32: 0.41}
+    assert sharp_minimum(v_with_residue, no_edge) == 29
+    assert sharp_minimum(v_with_residue, no_edge, max_floor=0.05) is None
+    assert sharp_minimum({27: 0.47, 28: 0.16, 29: 0.01, 30: 0.3}, no_edge, max_floor=0.05) == 29
