@@ -123,10 +123,12 @@ def detect_centres(image: np.ndarray, params: DetectionParams = DetectionParams(
     # so the filters' images stay in cache, and the bands share the cores (OpenCV and NumPy release the
     # GIL): the same centres to the bit
     h, w = g.shape
-    with ThreadPoolExecutor(_WORKERS) as pool:
-        found = list(pool.map(lambda a: _band_centres(g, a, min(a + _BAND_ROWS, h), params),
-                              range(0, h, _BAND_ROWS)))
-    x, y, u, contrast, width, flank = (np.concatenate(z) for z in zip(*found, strict=True))
+    x, y, u, contrast, width, flank = _all_bands(g, params)
+    # the flat top of a wide stripe is a run of equal gray levels that a one-level dip can cut in two: both
+    # halves pass the non-maximum suppression and refine to the same centroid. One centre per peak
+    one = np.r_[True, (y[1:] != y[:-1]) | (u[1:] - u[:-1] >= 0.5)]
+    if not one.all():
+        x, y, u, contrast, width, flank = (z[one] for z in (x, y, u, contrast, width, flank))
     c = Centres(u, y.astype(np.int32), contrast, width, flank)
     if params.weak_contrast <= 0 or params.weak_contrast >= params.min_contrast:
         return c
@@ -137,6 +139,15 @@ def detect_centres(image: np.ndarray, params: DetectionParams = DetectionParams(
 
 _BAND_ROWS = 256
 _WORKERS = min(4, os.cpu_count() or 1)
+
+
+def _all_bands(g: np.ndarray, params: DetectionParams) -> tuple[np.ndarray, ...]:
+    """x, y, u, contrast, width, flank of every candidate in the gray image g (H, W), in raster order."""
+    h = g.shape[0]
+    with ThreadPoolExecutor(_WORKERS) as pool:
+        found = list(pool.map(lambda a: _band_centres(g, a, min(a + _BAND_ROWS, h), params),
+                              range(0, h, _BAND_ROWS)))
+    return tuple(np.concatenate(z) for z in zip(*found, strict=True))
 
 
 def noise_sigma(g: np.ndarray) -> float:
