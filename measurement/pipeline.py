@@ -78,8 +78,11 @@ def scan(image: np.ndarray, calibration: Calibration, view: str = "side", ambien
     ok &= reliable(centres, params.detection)
     if ok.sum() < 50:
         n_found = int(np.bincount(np.bincount(centres.v)).argmax()) if len(centres) else 0
+        hint = ("is this calibration for this rig and stripe count, and do all its stripes fall inside the "
+                "image (the indices are read from rows that show every stripe)?" if n_found < calibration.stripes
+                else "is this calibration for this rig and stripe count?")
         raise ScanError(f"no stripe could be matched to the calibration's {calibration.stripes} light planes "
-                        f"(rows show about {n_found} stripes): is this calibration for this rig and stripe count?")
+                        f"(rows show about {n_found} stripes): {hint}")
     rays_s = rays_at(smooth_u[ok], centres.v[ok], ray_table(calibration.intrinsics))
     pts = intersect(rays_s, calibration.planes[labels.stripe[ok]])
     uv = np.column_stack([smooth_u[ok], centres.v[ok]])

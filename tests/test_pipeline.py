@@ -99,6 +99,16 @@ def test_camera_only_or_other_stripe_count_calibrations_are_refused(small_captur
         scan(img, truth_cal, "under")
 
 
+def test_a_pattern_reaching_past_the_image_is_named_in_the_refusal(small_capture, truth_cal):
+    """The indices are read from rows that show every stripe; when the outer stripes fall outside the
+    view (here: the left third of the frame is dark) the refusal says so instead of only doubting the
+    calibration."""
+    img = read_image(small_capture / "scan" / "side.png").copy()
+    img[:, : img.shape[1] // 3] = 0
+    with pytest.raises(ScanError, match="fall inside the image"):
+        scan(img, truth_cal)
+
+
 def test_a_scan_says_when_the_animal_could_not_be_placed(small_capture, monkeypatch):
     """When nothing fixes the animal's stripe indices the scan gives no numbers and says why, rather
     than numbers from a guessed index. Simulated by taking back every index the labeller gave off the
