@@ -162,7 +162,7 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     # 4: foreground clusters: relative labels by growing from a seed, offset from the shadow they cast
     weighed = np.zeros(m, bool)
     fg_labels, small, cl, lit = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n,
-                                            z_all, weighed, params.depth_range_mm)
+                                            z_all, weighed, params.depth_range_mm, bg_planes)
     if fg_labels:
         # pieces of the animal without shadow evidence of their own continue a labelled piece's surface
         is_bg = np.zeros(seg.max() + 1, bool)
@@ -184,8 +184,8 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     return Labels(labels, bg_planes, seg, int(weighed.sum()), int((weighed & (labels < 0)).sum()))
 
 
-def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, weighed, zrange
-                ) -> tuple[dict[int, int], list, np.ndarray, np.ndarray]:
+def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, weighed, zrange,
+                bg_planes=None) -> tuple[dict[int, int], list, np.ndarray, np.ndarray]:
     """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
     (M,) the centres of every piece that was weighed for an offset. Also returns the per-centre labels
     (M,) of the background and the placed pieces, and the projector cells they light (``lit_cells``).
@@ -226,7 +226,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
             continue
         weighed[idx] = True
         rel = _relative(seg, trial, mid)
-        off = occlusion_offset(rays, planes, cl, rel[seg], idx, n, projector_right(planes),
+        off = occlusion_offset(rays, planes, cl, rel[seg], idx, n, projector_right(planes), background=bg_planes,
                                beside_placed=len(idx) < placed_max, lit=lit)
         if _TRACE is not None:
             _TRACE.append((idx, rel[seg[idx]], off))

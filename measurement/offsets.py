@@ -56,7 +56,7 @@ def _in_sorted(x: np.ndarray, sorted_values: np.ndarray) -> np.ndarray:
 
 def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, bins: float = 0.002,
                       residue: float = 0.5, pattern_edge: float = 0.02, beside_placed: bool = False,
-                      lit: np.ndarray | None = None) -> int | None:
+                      lit: np.ndarray | None = None, background: np.ndarray | None = None) -> int | None:
     """Absolute offset of a cluster with relative labels ``r[idx]``, from the projector's point of view.
 
     A background point lit by stripe k at projector elevation e proves that nothing stood in front of it
@@ -73,11 +73,39 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
     may share) a curve that rises on both sides of its minimum is read at the minimum. Not for the
     first piece: there the conflict residue of stray centres at the outline often sits on the right
     offset and makes the next one up the minimum.
+
+    With the ``background`` planes (P, 4) the other physical bound joins in for the first piece: no part
+    of the animal lies behind the floor or the wall (``behind_background``). Sliding a piece one stripe
+    away from its conflicts moves it deeper, and its feet then sink through the floor; the ramp reading
+    never stops at such an offset.
     """
     curve = conflict_curve(rays, planes, cl, r, idx, n, bins, lit)
     if curve is None:
         return None
-    return choose_offset(*curve, projector_right, pattern_edge, beside_placed, residue)
+    # only for the first piece: a later one (a far leg, a tail) carries more stray centres with a wrong
+    # relative index, which can sink through the floor at the right offset (the sparse-fan render)
+    behind = (behind_background(rays, planes, r, idx, n, background)
+              if background is not None and not beside_placed else None)
+    return choose_offset(*curve, projector_right, pattern_edge, beside_placed, residue, behind=behind)
+
+
+def behind_background(rays, planes, r, idx, n, background: np.ndarray, margin_mm: float = 8.0
+                      ) -> dict[int, float]:
+    """Per offset: the share of the piece (relative labels ``r[idx]``) that it puts more than
+    ``margin_mm`` behind a background plane (P, 4), on the side away from the camera."""
+    rr = r[idx]
+    sub = idx if len(idx) <= 20000 else idx[:: len(idx) // 20000 + 1]
+    offs = np.arange(-int(rr.max()), n - int(rr.min()))
+    k = r[sub][None, :] + offs[:, None]  # (O, S)
+    inside = (k >= 0) & (k < n)
+    at, i = np.nonzero(inside)
+    p = intersect(rays[sub[i]], planes[k[at, i]])
+    camera_side = np.where(background[:, 3] <= 0, 1.0, -1.0)  # the sign of n.x - d at the camera (x = 0)
+    depth = (p @ background[:, :3].T - background[:, 3]) * camera_side  # (K, P), > 0 on the camera's side
+    sunk = (depth < -margin_mm).any(axis=1)
+    counts = np.bincount(at, minlength=len(offs))
+    share = np.bincount(at, weights=sunk, minlength=len(offs)) / np.maximum(counts, 1)
+    return {int(o): float(v) for o, v in zip(offs, share, strict=True)}
 
 
 def lit_cells(rays, planes, labels, which, bins: float = 0.002) -> np.ndarray:
@@ -147,8 +175,11 @@ def _distinct_cells(group: np.ndarray, stripe: np.ndarray, e: np.ndarray, groups
 
 def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, float]], projector_right: bool = True,
                   pattern_edge: float = 0.02, beside_placed: bool = False, residue: float = 0.5,
-                  ramp_steps: int = 12) -> int | None:
-    """The offset read off a conflict curve (see ``occlusion_offset``)."""
+                  ramp_steps: int = 12, behind: dict[int, float] | None = None, max_behind: float = 0.001
+                  ) -> int | None:
+    """The offset read off a conflict curve (see ``occlusion_offset``); ``behind`` : per offset the share
+    of the piece it puts behind the floor or wall, of which at most ``max_behind`` is tolerated (on the
+    simulator's renders the right offset puts none there, one stripe deeper 0.2-2.4 %)."""
     if beside_placed:
         sharp = sharp_minimum(conflicts, beyond)
         if sharp is not None:
@@ -193,6 +224,10 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
         best -= 1
     while beyond[best][0] > pattern_edge and best + 1 in conflicts:
         best += 1
+    # nothing of the animal lies behind the floor or wall: step back toward the conflicts until it does not
+    toward = -1 if projector_right else 1
+    while behind is not None and behind.get(best, 0.0) > max_behind and best + toward in conflicts:
+        best += toward
     return int(best)
 
 

@@ -109,3 +109,30 @@ def test_a_small_piece_that_conflicts_wherever_it_goes_is_not_placed():
     assert sharp_minimum(v_with_residue, no_edge) == 29
     assert sharp_minimum(v_with_residue, no_edge, max_floor=0.05) is None
     assert sharp_minimum({27: 0.47, 28: 0.16, 29: 0.01, 30: 0.3}, no_edge, max_floor=0.05) == 29
+
+
+def test_the_ramp_reading_never_stops_where_the_animal_would_sink_through_the_floor():
+    """A residue on the right offset (20) makes the ramp reading take the next one (21); there the piece
+    sits one depth step deeper and its feet go through the floor, which nothing physical allows."""
+    from measurement.offsets import choose_offset
+
+    conflicts = {**{o: 0.04 * (20 - o) + 0.03 for o in range(8, 20)}, 20: 0.03, 21: 0.0, 22: 0.0, 23: 0.03, 24: 0.1}
+    beyond = {o: (0.0, 0.0) for o in conflicts}
+    assert choose_offset(conflicts, beyond) == 21
+    behind = {o: 0.0 if o <= 20 else 0.004 * (o - 20) for o in conflicts}
+    assert choose_offset(conflicts, beyond, behind=behind) == 20
+
+
+def test_a_plate_pushed_deeper_sinks_behind_the_wall():
+    """The exact plate-and-wall scene: at its true offset and nearer the camera nothing of the plate lies
+    behind the wall; five stripes deeper (the wall is 300 mm behind it) all of it does."""
+    from measurement.offsets import behind_background
+
+    planes, rays, cl, idx, true = _scene(-60.0, 60.0)
+    k_min = int(true[idx].min())
+    r = np.zeros(len(rays), np.int64)
+    r[idx] = true[idx] - k_min
+    wall = np.array([[0.0, 0.0, 1.0, WALL_Z]])
+    share = behind_background(rays, planes, r, idx, N, wall)
+    assert all(share[o] == 0.0 for o in share if o <= k_min)
+    assert share[k_min + 5] == 1.0
