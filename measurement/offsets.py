@@ -8,6 +8,7 @@ stood in front of it, so a wrong offset slides the piece onto lit background cel
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 
 import numpy as np
 
@@ -84,28 +85,26 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
         return None
     # only for the first piece: a later one (a far leg, a tail) carries more stray centres with a wrong
     # relative index, which can sink through the floor at the right offset (the sparse-fan render)
-    behind = (behind_background(rays, planes, r, idx, n, background)
-              if background is not None and not beside_placed else None)
+    behind = None
+    if background is not None and not beside_placed:
+        def behind(off: int) -> float:
+            return behind_background(rays, planes, r, idx, n, background, off)
     return choose_offset(*curve, projector_right, pattern_edge, beside_placed, residue, behind=behind)
 
 
-def behind_background(rays, planes, r, idx, n, background: np.ndarray, margin_mm: float = 8.0
-                      ) -> dict[int, float]:
-    """Per offset: the share of the piece (relative labels ``r[idx]``) that it puts more than
+def behind_background(rays, planes, r, idx, n, background: np.ndarray, off: int, margin_mm: float = 8.0
+                      ) -> float:
+    """The share of the piece (relative labels ``r[idx]``) that offset ``off`` puts more than
     ``margin_mm`` behind a background plane (P, 4), on the side away from the camera."""
-    rr = r[idx]
     sub = idx if len(idx) <= 20000 else idx[:: len(idx) // 20000 + 1]
-    offs = np.arange(-int(rr.max()), n - int(rr.min()))
-    k = r[sub][None, :] + offs[:, None]  # (O, S)
+    k = r[sub] + off
     inside = (k >= 0) & (k < n)
-    at, i = np.nonzero(inside)
-    p = intersect(rays[sub[i]], planes[k[at, i]])
+    if not inside.any():
+        return 0.0
+    p = intersect(rays[sub[inside]], planes[k[inside]])
     camera_side = np.where(background[:, 3] <= 0, 1.0, -1.0)  # the sign of n.x - d at the camera (x = 0)
     depth = (p @ background[:, :3].T - background[:, 3]) * camera_side  # (K, P), > 0 on the camera's side
-    sunk = (depth < -margin_mm).any(axis=1)
-    counts = np.bincount(at, minlength=len(offs))
-    share = np.bincount(at, weights=sunk, minlength=len(offs)) / np.maximum(counts, 1)
-    return {int(o): float(v) for o, v in zip(offs, share, strict=True)}
+    return float((depth < -margin_mm).any(axis=1).mean())
 
 
 def lit_cells(rays, planes, labels, which, bins: float = 0.002) -> np.ndarray:
@@ -175,9 +174,9 @@ def _distinct_cells(group: np.ndarray, stripe: np.ndarray, e: np.ndarray, groups
 
 def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, float]], projector_right: bool = True,
                   pattern_edge: float = 0.02, beside_placed: bool = False, residue: float = 0.5,
-                  ramp_steps: int = 12, behind: dict[int, float] | None = None, max_behind: float = 0.001
-                  ) -> int | None:
-    """The offset read off a conflict curve (see ``occlusion_offset``); ``behind`` : per offset the share
+                  ramp_steps: int = 12, behind: Callable[[int], float] | None = None,
+                  max_behind: float = 0.001) -> int | None:
+    """The offset read off a conflict curve (see ``occlusion_offset``); ``behind`` : offset -> the share
     of the piece it puts behind the floor or wall, of which at most ``max_behind`` is tolerated (on the
     simulator's renders the right offset puts none there, one stripe deeper 0.2-2.4 %)."""
     if beside_placed:
@@ -226,7 +225,7 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
         best += 1
     # nothing of the animal lies behind the floor or wall: step back toward the conflicts until it does not
     toward = -1 if projector_right else 1
-    while behind is not None and behind.get(best, 0.0) > max_behind and best + toward in conflicts:
+    while behind is not None and best + toward in conflicts and behind(best) > max_behind:
         best += toward
     return int(best)
 

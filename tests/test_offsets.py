@@ -119,8 +119,7 @@ def test_the_ramp_reading_never_stops_where_the_animal_would_sink_through_the_fl
     conflicts = {**{o: 0.04 * (20 - o) + 0.03 for o in range(8, 20)}, 20: 0.03, 21: 0.0, 22: 0.0, 23: 0.03, 24: 0.1}
     beyond = {o: (0.0, 0.0) for o in conflicts}
     assert choose_offset(conflicts, beyond) == 21
-    behind = {o: 0.0 if o <= 20 else 0.004 * (o - 20) for o in conflicts}
-    assert choose_offset(conflicts, beyond, behind=behind) == 20
+    assert choose_offset(conflicts, beyond, behind=lambda o: 0.0 if o <= 20 else 0.004 * (o - 20)) == 20
 
 
 def test_a_plate_pushed_deeper_sinks_behind_the_wall():
@@ -133,6 +132,6 @@ def test_a_plate_pushed_deeper_sinks_behind_the_wall():
     r = np.zeros(len(rays), np.int64)
     r[idx] = true[idx] - k_min
     wall = np.array([[0.0, 0.0, 1.0, WALL_Z]])
-    share = behind_background(rays, planes, r, idx, N, wall)
+    share = {o: behind_background(rays, planes, r, idx, N, wall, o) for o in range(k_min - 6, k_min + 8)}
     assert all(share[o] == 0.0 for o in share if o <= k_min)
     assert share[k_min + 5] == 1.0
