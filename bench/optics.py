@@ -1,5 +1,6 @@
-"""Scan robustness to the optics and the sensor: the same animal and rig geometry with other stripe
-widths, another stripe fan, a noisy sensor, a bright room and a soft camera focus.
+"""Scan robustness to the optics, the sensor and the scene: the same animal and rig geometry with other
+stripe widths, another stripe fan, a noisy sensor, a bright room, a soft camera focus, no wall, and a
+dark or a white floor.
 
     python bench/optics.py [--size 1536x1024] [--cache /tmp/bodyscan-bench] [--seed 4]
 
@@ -27,7 +28,7 @@ from measurement.simulate.capture import write_capture  # noqa: E402
 from measurement.simulate.rig import Rig, default_rig  # noqa: E402
 
 # projector: stripe sigma (projector-normalised; the reference is 0.0009) and a scale of the stripe fan;
-# light: Lighting overrides for every exposure
+# light: Lighting overrides for every exposure; scene: options of the animal views' scene
 VARIANTS: dict[str, dict] = {
     "reference": {},
     "wide stripes (2x sigma)": {"sigma": 0.0018},
@@ -37,6 +38,9 @@ VARIANTS: dict[str, dict] = {
     "noisy sensor (4x read, 6x shot)": {"light": {"read_noise": 6.0, "gain": 1.5}},
     "bright room (2.5x ambient)": {"light": {"ambient": 150.0}},
     "soft focus (2.5x camera blur)": {"light": {"blur_px": 2.0}},
+    "no wall": {"scene": {"wall": False}},
+    "dark floor (albedo 0.12)": {"scene": {"floor_albedo": 0.12}},
+    "white floor (albedo 0.85)": {"scene": {"floor_albedo": 0.85}},
 }
 
 
@@ -52,7 +56,7 @@ def capture_for(cache: Path, name: str, variant: dict, size: tuple[int, int], se
             p = replace(p, stripe_x=p.stripe_x * variant["fan"])
         t0 = time.perf_counter()
         write_capture(out, stripes=40, size=size, seed=seed, scenes=("side", "top"), poses=0, fur=True,
-                      rig=Rig(rig.intrinsics, p), light=variant.get("light"))
+                      rig=Rig(rig.intrinsics, p), light=variant.get("light"), scene=variant.get("scene"))
         print(f"  rendered {out.name} in {time.perf_counter() - t0:.0f} s", flush=True)
     return out
 

@@ -57,8 +57,10 @@ def _noise3(points: np.ndarray, rng_seed: int, waves: int = 7, lo: float = 50, h
     return out / np.sqrt(waves / 2)
 
 
-def animal_scene(animal: Animal, view: str, fur: bool, seed: int) -> tuple[list, np.ndarray, np.ndarray]:
-    """Surfaces of a scan scene in camera coordinates plus the camera pose (R_cam_world, t_cam_world)."""
+def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = True,
+                 floor_albedo: float | None = None) -> tuple[list, np.ndarray, np.ndarray]:
+    """Surfaces of a scan scene in camera coordinates plus the camera pose (R_cam_world, t_cam_world).
+    ``wall`` : the view's wall, if it has one; ``floor_albedo`` : a uniform floor instead of the mottled one."""
     R, t = look_at(*VIEW_CAMERAS[view])
     to_world = lambda p: (p - t) @ R  # noqa: E731  camera -> world
 
@@ -68,13 +70,15 @@ def animal_scene(animal: Animal, view: str, fur: bool, seed: int) -> tuple[list,
         n = _noise3(to_world(points), seed + 11)
         return np.clip(0.5 + 0.32 * n, 0.12, 0.9)
 
-    def floor_albedo(points: np.ndarray) -> np.ndarray:
+    def floor(points: np.ndarray) -> np.ndarray:
+        if floor_albedo is not None:
+            return np.full(len(points), floor_albedo)
         return 0.38 + 0.08 * _noise3(to_world(points), seed + 5, 5, 80, 400)
 
     surfaces: list = [MeshSurface(animal.vertices @ R.T + t, animal.faces, "animal", fur_albedo)]
     n_floor = R @ np.array([0.0, 1.0, 0.0])
-    surfaces.append(PlaneSurface(n_floor, float(n_floor @ t), "floor", floor_albedo))
-    if view in WALLS:
+    surfaces.append(PlaneSurface(n_floor, float(n_floor @ t), "floor", floor))
+    if wall and view in WALLS:
         nw, off = WALLS[view]
         n_wall = R @ np.asarray(nw, float)
         surfaces.append(PlaneSurface(n_wall, float(off + n_wall @ t), "wall",
@@ -91,12 +95,13 @@ def calibration_scene(board: Board, R: np.ndarray, t: np.ndarray, fx: float) -> 
 def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] = (3072, 2048), seed: int = 0,
                   scenes: tuple[str, ...] = ("side", "top"), poses: int = 12, mesh: str | None = None,
                   fur: bool = True, board: Board | None = None, defects: dict[int, str] | None = None,
-                  rig: Rig | None = None, light: dict | None = None) -> Path:
+                  rig: Rig | None = None, light: dict | None = None, scene: dict | None = None) -> Path:
     """Render a complete capture (calibration poses + animal views) with ground truth; returns ``out_dir``.
 
     defects : {pose number (1-based): "no_board" | "no_stripes"} renders deliberately unusable poses.
     light   : overrides of Lighting fields for every exposure (e.g. {"read_noise": 4.0, "gain": 0.8}),
               plus "stripe_ambient" to set the room light of the calibration stripe images.
+    scene   : options of the animal views' scene (``animal_scene``: "wall", "floor_albedo").
     """
     light = dict(light or {})
     stripe_ambient = light.pop("stripe_ambient", None)
@@ -133,14 +138,14 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
         np.savez_compressed(out / "truth" / f"{name}_stripes.npz", **st)  # type: ignore[arg-type]
     animal = from_mesh(mesh) if mesh else quadruped(seed=seed)
     for view in scenes:
-        _write_view(out, view, animal, rig, rays_xy, fur, seed, rng, truth, light)
+        _write_view(out, view, animal, rig, rays_xy, fur, seed, rng, truth, light, scene or {})
     (out / "truth" / "truth.json").write_text(json.dumps(truth, indent=1))
     return out
 
 
 def _write_view(out: Path, view: str, animal: Animal, rig: Rig, rays_xy: np.ndarray, fur: bool, seed: int,
-                rng: np.random.Generator, truth: dict, light: dict) -> None:
-    surfaces, R, t = animal_scene(animal, view, fur, seed)
+                rng: np.random.Generator, truth: dict, light: dict, scene: dict) -> None:
+    surfaces, R, t = animal_scene(animal, view, fur, seed, **scene)
     hits = trace(surfaces, rig.intrinsics, rays_xy)
     irr, stripe = stripe_irradiance(hits, rig, surfaces)
     ambient = rng.uniform(30, 50)
