@@ -1,6 +1,6 @@
 """Scan robustness to the optics, the sensor and the scene: the same animal and rig geometry with other
-stripe widths, another stripe fan, a noisy sensor, a bright room, a soft camera focus, no wall, and a
-dark or a white floor.
+stripe widths, another stripe fan, a noisy sensor, a bright room, a soft camera focus, no wall, a dark
+or a white floor, and frames that went through JPEG compression.
 
     python bench/optics.py [--size 1536x1024] [--cache /tmp/bodyscan-bench] [--seed 4]
 
@@ -18,6 +18,8 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+
+import cv2
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -41,6 +43,8 @@ VARIANTS: dict[str, dict] = {
     "no wall": {"scene": {"wall": False}},
     "dark floor (albedo 0.12)": {"scene": {"floor_albedo": 0.12}},
     "white floor (albedo 0.85)": {"scene": {"floor_albedo": 0.85}},
+    "JPEG quality 90": {"jpeg": 90},
+    "JPEG quality 75": {"jpeg": 75},
 }
 
 
@@ -57,6 +61,12 @@ def capture_for(cache: Path, name: str, variant: dict, size: tuple[int, int], se
         t0 = time.perf_counter()
         write_capture(out, stripes=40, size=size, seed=seed, scenes=("side", "top"), poses=0, fur=True,
                       rig=Rig(rig.intrinsics, p), light=variant.get("light"), scene=variant.get("scene"))
+        if "jpeg" in variant:  # the same frames through a lossy camera pipeline, decoded again
+            for view in ("side", "top"):
+                path = out / "scan" / f"{view}.png"
+                ok, buf = cv2.imencode(".jpg", cv2.imread(str(path), cv2.IMREAD_UNCHANGED),
+                                       [cv2.IMWRITE_JPEG_QUALITY, variant["jpeg"]])
+                cv2.imwrite(str(path), cv2.imdecode(buf, cv2.IMREAD_UNCHANGED))
         print(f"  rendered {out.name} in {time.perf_counter() - t0:.0f} s", flush=True)
     return out
 
