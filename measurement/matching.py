@@ -12,7 +12,7 @@ Here (status and figures: docs/benchmarks.md; the animal's offset is not yet rel
    its own planes and claims the pieces that exactly one index puts on a plane (``background``);
 4. the animal is labelled piece by piece: indices relative to a seed by depth continuity with
    neighbouring stripes, the absolute offset from the projector's point of view (``offsets``), then
-   grown into neighbouring pieces one stripe at a time;
+   grown into neighbouring pieces one stripe at a time and along a stripe cut into pieces;
 5. labels whose depth falls outside the working range are dropped, and each row is kept in
    left-to-right order.
 """
@@ -31,7 +31,7 @@ from .background import (
     segments_on_planes,
     split_foreground,
 )
-from .detection import Centres
+from .detection import Centres, reliable
 from .offsets import conflict_curve, lit_cells, occlusion_offset, projector_right, sharp_minimum
 from .segments import (
     denoise,
@@ -173,6 +173,9 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
         _grow_all(c, rays, planes, seg, fg_labels, fg_mask, left, right, tol, n, None, depth_only=True,
                   gaps=(1,), min_share=0.8, slope=True)
     seg_label.update(fg_labels)
+    if fg_labels:  # a stripe cut into pieces along its length (a tail tip) keeps its label
+        seg_label.update(_continue_along(c, rays, planes, seg, seg_label, fg_mask, set(fg_labels), link,
+                                         0.25 * spacing_mm))
     if fg_labels and small:  # isolated small pieces (a head seen from above) hemmed in by what is placed
         seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit))
     labels = _labels_of(seg, seg_label, long_seg)
@@ -241,6 +244,65 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         lit = _claim(rays, planes, cl, lit, idx, lab)
         placed_max = max(placed_max, len(idx))
     return out, small, cl, lit
+
+
+def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px, tol_mm, rounds: int = 6
+                    ) -> dict[int, int]:
+    """Labels for unlabelled segments in ``mask`` (M,) that continue a labelled animal segment (in
+    ``animal``) along its stripe: one starts one or two rows below where the other ends (or ends above
+    where it starts), within ``link_px`` columns, and on that segment's light plane the two end points lie
+    within ``tol_mm`` in depth. Stripes on a thin, steep part (a tail tip) break into short segments that
+    no row neighbour reaches. Only segments whose centres are mostly reliable peaks continue a stripe:
+    the fur's stray specks beside a stripe's end are one-sided or wide."""
+    out: dict[int, int] = {}
+    table = _label_table(seg, seg_label)
+    good = np.bincount(seg, weights=reliable(c), minlength=seg.max() + 1) >= 0.6 * np.bincount(
+        seg, minlength=seg.max() + 1)
+    sids = np.unique(seg)
+    order = np.lexsort((c.v, seg))
+    s_sorted = seg[order]
+    starts = np.searchsorted(s_sorted, sids)
+    ends = np.searchsorted(s_sorted, sids, side="right") - 1
+    first = np.full(seg.max() + 1, -1)
+    last = np.full(seg.max() + 1, -1)
+    first[sids], last[sids] = order[starts], order[ends]
+    in_mask = np.zeros(seg.max() + 1, bool)
+    in_mask[np.unique(seg[mask])] = True
+    is_animal = np.zeros(seg.max() + 1, bool)
+    is_animal[np.fromiter(animal, np.int64, len(animal))] = True
+    for _ in range(rounds):
+        done: dict[int, int] = {}
+        src = np.flatnonzero(is_animal & (table >= 0))
+        dst = np.flatnonzero(in_mask & (table < 0) & good)
+        if len(src) == 0 or len(dst) == 0:
+            break
+        for a_end, b_end, direction in ((last, first, 1), (first, last, -1)):
+            a = a_end[src]
+            b = b_end[dst]
+            # candidate pairs: b's row is one or two rows past a's, columns within link_px
+            key_a = c.v[a].astype(np.int64)
+            for gap in (1, 2):
+                want = c.v[b].astype(np.int64) - direction * gap
+                pos = np.searchsorted(np.sort(key_a), want)
+                srt = np.argsort(key_a, kind="stable")
+                for off in range(3):
+                    j = np.clip(pos + off, 0, len(a) - 1)
+                    ai = srt[j]
+                    ok = (key_a[ai] == want) & (np.abs(c.u[a[ai]] - c.u[b]) <= link_px)
+                    if not ok.any():
+                        continue
+                    k = table[src[ai[ok]]]
+                    za = depth_on(rays[a[ai[ok]]], planes[k])
+                    zb = depth_on(rays[b[ok]], planes[k])
+                    near = np.abs(za - zb) < tol_mm
+                    for sid, lab in zip(dst[ok][near].tolist(), k[near].tolist(), strict=True):
+                        done.setdefault(sid, lab)
+        if not done:
+            break
+        out.update(done)
+        table[np.fromiter(done, np.int64, len(done))] = np.fromiter(done.values(), np.int64, len(done))
+        is_animal[np.fromiter(done, np.int64, len(done))] = True
+    return out
 
 
 def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, known, lit) -> dict[int, int]:
@@ -408,6 +470,7 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
         own, kn = table[own_seg], table[nb_seg]
         take = ((own >= 0) if relabel else (own < 0)) & (kn >= 0)
         idx, nbr, kn, voter, far, far_seg = idx[take], nbr[take], kn[take], own_seg[take], far[take], far_seg[take]
+        nb_seg = nb_seg[take]
         if len(idx) == 0:
             continue
         if depth_only:
@@ -424,7 +487,15 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
                     near_dx = np.abs(rays[idx[has], 0] - rays[nbr[has], 0])
                     far_dx = np.abs(rays[nbr[has], 0] - rays[far[has], 0])
                     even = (near_dx < 1.3 * far_dx) & (far_dx < 1.3 * near_dx)
-                    step[has] = np.where((np.abs(zn[has] - zf) < 2 * tol_mm) & even, zn[has] - zf, 0.0)
+                    valid = (np.abs(zn[has] - zf) < 2 * tol_mm) & even
+                    step[has] = np.where(valid, zn[has] - zf, 0.0)
+                    # rows past the outer stripe's end (a tail tip: each stripe ends lower) take the mean
+                    # step of their neighbour segment, when at least three of its rows measured one
+                    vi = np.flatnonzero(has)[valid]
+                    cnt = np.bincount(nb_seg[vi], minlength=len(table))
+                    mean = np.bincount(nb_seg[vi], weights=step[vi], minlength=len(table)) / np.maximum(cnt, 1)
+                    fill = ~has & (cnt[nb_seg] >= 3)
+                    step[fill] = mean[nb_seg[fill]]
         else:
             pn = intersect(rays[nbr], planes[kn])
         # the voters' points on the planes of every gap at once (row by row as one gap at a time)

@@ -99,3 +99,22 @@ def test_growth_follows_a_steep_surface_by_its_depth_step():
         got = out >= 0
         assert (out[got] == lab[got]).all()
         assert got.all() == expect_all
+
+
+def test_a_stripe_cut_along_its_length_keeps_its_label_but_stray_specks_do_not():
+    """A tail tip's stripe broken into three pieces along its length: the piece below a labelled one
+    continues its label; a piece of one-sided peaks (fur specks) at the end does not."""
+    from measurement.detection import Centres
+    from measurement.matching import _continue_along
+    from measurement.simulate.rig import default_rig
+
+    planes = default_rig((1536, 1024), 40).projector.planes_cam()
+    v = np.arange(60)
+    u = 700 + 0.4 * v
+    flank = np.where(v >= 40, 1.0, 30.0).astype(np.float32)  # the last 20 rows: one-sided peaks
+    c = Centres(u, v.astype(np.int32), np.full(60, 40.0, np.float32), np.full(60, 4.0, np.float32), flank)
+    f = 1667.0
+    rays = np.column_stack([(u - 768) / f, (v - 512) / f, np.ones(60)])
+    seg = np.repeat([0, 1, 2], 20)
+    out = _continue_along(c, rays, planes, seg, {0: 17}, np.ones(60, bool), {0}, link_px=2.0, tol_mm=5.0)
+    assert out == {1: 17}
