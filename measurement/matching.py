@@ -32,7 +32,14 @@ from .background import (
     split_foreground,
 )
 from .detection import Centres, reliable
-from .offsets import conflict_curve, lit_cells, occlusion_offset, projector_right, sharp_minimum
+from .offsets import (
+    conflict_curve,
+    lit_cells,
+    occlusion_offset,
+    projector_elevation,
+    projector_right,
+    sharp_minimum,
+)
 from .segments import (
     denoise,
     link_segments,
@@ -175,7 +182,7 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     seg_label.update(fg_labels)
     if fg_labels:  # a stripe cut into pieces along its length (a tail tip) keeps its label
         seg_label.update(_continue_along(c, rays, planes, seg, seg_label, fg_mask, set(fg_labels), link,
-                                         0.25 * spacing_mm))
+                                         0.25 * spacing_mm, lit))
     if fg_labels and small:  # isolated small pieces (a head seen from above) hemmed in by what is placed
         seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit))
     labels = _labels_of(seg, seg_label, long_seg)
@@ -246,14 +253,16 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     return out, small, cl, lit
 
 
-def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px, tol_mm, rounds: int = 6
-                    ) -> dict[int, int]:
+def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px, tol_mm,
+                    lit: np.ndarray | None = None, rounds: int = 6) -> dict[int, int]:
     """Labels for unlabelled segments in ``mask`` (M,) that continue a labelled animal segment (in
     ``animal``) along its stripe: one starts one or two rows below where the other ends (or ends above
     where it starts), within ``link_px`` columns, and on that segment's light plane the two end points lie
     within ``tol_mm`` in depth. Stripes on a thin, steep part (a tail tip) break into short segments that
     no row neighbour reaches. Only segments whose centres are mostly reliable peaks continue a stripe:
-    the fur's stray specks beside a stripe's end are one-sided or wide."""
+    the fur's stray specks beside a stripe's end are one-sided or wide. With the ``lit`` projector cells
+    (``lit_cells``) a segment that would put more than a quarter of its cells on lit background does not
+    continue the stripe either: something else lit those projector rays."""
     out: dict[int, int] = {}
     table = _label_table(seg, seg_label)
     good = np.bincount(seg, weights=reliable(c), minlength=seg.max() + 1) >= 0.6 * np.bincount(
@@ -296,13 +305,26 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
                     zb = depth_on(rays[b[ok]], planes[k])
                     near = np.abs(za - zb) < tol_mm
                     for sid, lab in zip(dst[ok][near].tolist(), k[near].tolist(), strict=True):
-                        done.setdefault(sid, lab)
+                        if sid not in done and _lit_share(rays, planes, seg, sid, lab, lit) <= 0.25:
+                            done[sid] = lab
         if not done:
             break
         out.update(done)
         table[np.fromiter(done, np.int64, len(done))] = np.fromiter(done.values(), np.int64, len(done))
         is_animal[np.fromiter(done, np.int64, len(done))] = True
     return out
+
+
+def _lit_share(rays, planes, seg, sid, k, lit) -> float:
+    """Share of segment ``sid``'s cells on light plane ``k`` that lie well inside lit background (0 without
+    ``lit``)."""
+    if lit is None or len(lit) == 0:
+        return 0.0
+    ii = np.flatnonzero(seg == sid)
+    p = intersect(rays[ii], planes[np.full(len(ii), k)])
+    e = np.floor(projector_elevation(p, planes) / 0.002).astype(np.int64)
+    cells = k * 1_000_000 + e
+    return float((np.isin(cells, lit) & np.isin(cells - 1, lit) & np.isin(cells + 1, lit)).mean())
 
 
 def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, known, lit) -> dict[int, int]:

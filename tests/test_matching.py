@@ -118,3 +118,25 @@ def test_a_stripe_cut_along_its_length_keeps_its_label_but_stray_specks_do_not()
     seg = np.repeat([0, 1, 2], 20)
     out = _continue_along(c, rays, planes, seg, {0: 17}, np.ones(60, bool), {0}, link_px=2.0, tol_mm=5.0)
     assert out == {1: 17}
+
+
+def test_a_piece_on_projector_rays_that_lit_something_else_does_not_continue_the_stripe():
+    """The same cut stripe, but the projector cells of its second piece are already lit elsewhere (on
+    the background): a projector ray lights one surface, so that piece is not this stripe's."""
+    from measurement.detection import Centres
+    from measurement.matching import _continue_along
+    from measurement.offsets import lit_cells
+    from measurement.simulate.rig import default_rig
+
+    planes = default_rig((1536, 1024), 40).projector.planes_cam()
+    v = np.arange(40)
+    u = 700 + 0.4 * v
+    c = Centres(u, v.astype(np.int32), np.full(40, 40.0, np.float32), np.full(40, 4.0, np.float32),
+                np.full(40, 30.0, np.float32))
+    f = 1667.0
+    rays = np.column_stack([(u - 768) / f, (v - 512) / f, np.ones(40)])
+    seg = np.repeat([0, 1], 20)
+    args = (c, rays, planes, seg, {0: 17}, np.ones(40, bool), {0}, 2.0, 5.0)
+    assert _continue_along(*args) == {1: 17}
+    lit = lit_cells(rays, planes, np.full(40, 17), np.arange(20, 40))
+    assert _continue_along(*args, lit) == {}
