@@ -288,23 +288,23 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
         for a_end, b_end, direction in ((last, first, 1), (first, last, -1)):
             a = a_end[src]
             b = b_end[dst]
-            # candidate pairs: b's row is one or two rows past a's, columns within link_px
-            key_a = c.v[a].astype(np.int64)
+            # candidate pairs: b's end is one or two rows past a's, within link_px columns; ends are
+            # keyed by row and column together, so a row where many stripes end costs nothing extra
+            span = 4.0 * (float(c.u.max()) + link_px + 1.0)
+            key_a = c.v[a] * span + c.u[a]
+            srt = np.argsort(key_a)
+            key_sorted = key_a[srt]
             for gap in (1, 2):
-                want = c.v[b].astype(np.int64) - direction * gap
-                pos = np.searchsorted(np.sort(key_a), want)
-                srt = np.argsort(key_a, kind="stable")
-                for off in range(3):
-                    j = np.clip(pos + off, 0, len(a) - 1)
-                    ai = srt[j]
-                    ok = (key_a[ai] == want) & (np.abs(c.u[a[ai]] - c.u[b]) <= link_px)
-                    if not ok.any():
-                        continue
-                    k = table[src[ai[ok]]]
-                    za = depth_on(rays[a[ai[ok]]], planes[k])
-                    zb = depth_on(rays[b[ok]], planes[k])
-                    near = np.abs(za - zb) < tol_mm
-                    for sid, lab in zip(dst[ok][near].tolist(), k[near].tolist(), strict=True):
+                want = (c.v[b] - direction * gap) * span + c.u[b]
+                lo = np.searchsorted(key_sorted, want - link_px)
+                hi = np.searchsorted(key_sorted, want + link_px, side="right")
+                for off in range(int((hi - lo).max(initial=0))):
+                    has = lo + off < hi
+                    ai = srt[np.minimum(lo + off, len(a) - 1)][has]
+                    bi = np.flatnonzero(has)
+                    k = table[src[ai]]
+                    near = np.abs(depth_on(rays[a[ai]], planes[k]) - depth_on(rays[b[bi]], planes[k])) < tol_mm
+                    for sid, lab in zip(dst[bi][near].tolist(), k[near].tolist(), strict=True):
                         if sid not in done and _lit_share(rays, planes, seg, sid, lab, lit) <= 0.25:
                             done[sid] = lab
         if not done:
