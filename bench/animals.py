@@ -15,12 +15,9 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.common import label_view, pieces_text  # noqa: E402
-from measurement.simulate.capture import write_capture  # noqa: E402
+from bench.common import cached_capture, print_pieces, summary  # noqa: E402
 
 RENDERS = (("fox.obj", 40, True, 3), ("cow.obj", 40, True, 3), ("horse.ply", 50, False, 5),
            ("shiba-inu.obj", 40, True, 6), ("fox.obj", 50, False, 7), ("cow.obj", 50, True, 8))
@@ -33,21 +30,14 @@ def main() -> None:
     ap.add_argument("--cache", default="/tmp/bodyscan-bench")
     args = ap.parse_args()
     size = tuple(int(v) for v in args.size.split("x"))
-    rights = []
+    rights: list[float] = []
     print("render                    view  labelled  right    pieces (centres: chosen offset / true)")
     for mesh, stripes, fur, seed in RENDERS:
         name = f"{Path(mesh).stem}-{stripes}-{'fur' if fur else 'clean'}-{seed}"
-        cap = Path(args.cache) / f"animal-{size[0]}x{size[1]}-{name}"
-        if not (cap / "truth" / "truth.json").exists():
-            write_capture(cap, stripes=stripes, size=size, seed=seed, scenes=("side", "top"), poses=0, fur=fur,
-                          mesh=str(Path(args.meshes) / mesh))
-        for view in ("side", "top"):
-            v = label_view(cap, view)
-            rights.append(v.right)
-            print(f"{name:25s} {view:4s}  {v.labelled:8.1%}  {v.right:7.2%}   {pieces_text(v.pieces)}", flush=True)
-    r = np.array(rights)
-    print(f"animal labels right: median {np.nanmedian(r):.2%}; views at least 95 % right: {(r >= 0.95).sum()} of {len(r)}")
-
+        cap = cached_capture(Path(args.cache) / f"animal-{size[0]}x{size[1]}-{name}", stripes=stripes,
+                             size=size, seed=seed, fur=fur, mesh=str(Path(args.meshes) / mesh))
+        rights += print_pieces(name, cap)
+    print(summary(rights))
 
 if __name__ == "__main__":
     main()

@@ -14,12 +14,9 @@ import argparse
 import sys
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.common import label_view, pieces_text  # noqa: E402
-from measurement.simulate.capture import write_capture  # noqa: E402
+from bench.common import cached_capture, print_pieces, summary  # noqa: E402
 from measurement.simulate.rig import default_rig  # noqa: E402
 
 GEOMETRIES = {"left": -250.0, "narrow": 150.0, "wide": 400.0}  # projector baseline, mm (negative: left)
@@ -32,22 +29,15 @@ def main() -> None:
     ap.add_argument("--cache", default="/tmp/bodyscan-bench")
     args = ap.parse_args()
     size = tuple(int(v) for v in args.size.split("x"))
-    rights = []
+    rights: list[float] = []
     print("rig                       view  labelled  right    pieces (centres: chosen offset / true)")
     for name, baseline in GEOMETRIES.items():
         for stripes, fur, seed in RENDERS:
             label = f"{name}-{stripes}-{'fur' if fur else 'clean'}-{seed}"
-            cap = Path(args.cache) / f"geometry-{size[0]}x{size[1]}-{label}"
-            if not (cap / "truth" / "truth.json").exists():
-                write_capture(cap, stripes=stripes, size=size, seed=seed, scenes=("side", "top"), poses=0, fur=fur,
-                              rig=default_rig(size, stripes, baseline_mm=baseline))
-            for view in ("side", "top"):
-                s = label_view(cap, view)
-                rights.append(s.right)
-                print(f"{label:25s} {view:4s}  {s.labelled:8.1%}  {s.right:7.2%}   {pieces_text(s.pieces)}", flush=True)
-    r = np.array(rights)
-    print(f"animal labels right: median {np.nanmedian(r):.2%}; views at least 95 % right: {(r >= 0.95).sum()} of {len(r)}")
-
+            cap = cached_capture(Path(args.cache) / f"geometry-{size[0]}x{size[1]}-{label}", stripes=stripes,
+                                 size=size, seed=seed, fur=fur, rig=default_rig(size, stripes, baseline_mm=baseline))
+            rights += print_pieces(label, cap)
+    print(summary(rights))
 
 if __name__ == "__main__":
     main()

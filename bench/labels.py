@@ -17,8 +17,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.common import label_view  # noqa: E402
-from measurement.simulate.capture import write_capture  # noqa: E402
+from bench.common import VIEWS, cached_capture, label_view  # noqa: E402
 
 RENDERS = ((40, True, 11), (40, False, 12), (50, True, 13), (40, True, 14))
 
@@ -32,10 +31,9 @@ def main() -> None:
     rights = []
     print("render              view  animal labelled  right    background right  labelling ms")
     for stripes, fur, seed in RENDERS:
-        cap = Path(args.cache) / f"labels-{size[0]}x{size[1]}-{stripes}-{'fur' if fur else 'clean'}-{seed}"
-        if not (cap / "truth" / "truth.json").exists():
-            write_capture(cap, stripes=stripes, size=size, seed=seed, scenes=("side", "top"), poses=0, fur=fur)
-        for view in ("side", "top"):
+        cap = cached_capture(Path(args.cache) / f"labels-{size[0]}x{size[1]}-{stripes}-{'fur' if fur else 'clean'}-{seed}",
+                             stripes=stripes, size=size, seed=seed, fur=fur)
+        for view in VIEWS:
             v = label_view(cap, view)
             rights.append(v.right)
             print(f"{stripes} {'fur  ' if fur else 'clean'} seed {seed:3d}   {view:4s}  {v.labelled:13.1%}  "

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -23,10 +22,9 @@ import cv2
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.common import label_view, pieces_text  # noqa: E402
+from bench.common import VIEWS, cached_capture, label_view, pieces_text  # noqa: E402
 from bench.scan import evaluate, pct_err  # noqa: E402
 from measurement.errors import ScanError  # noqa: E402
-from measurement.simulate.capture import write_capture  # noqa: E402
 from measurement.simulate.rig import Rig, default_rig  # noqa: E402
 
 # projector: stripe sigma (projector-normalised; the reference is 0.0009) and a scale of the stripe fan;
@@ -50,26 +48,23 @@ VARIANTS: dict[str, dict] = {
 
 def capture_for(cache: Path, name: str, variant: dict, size: tuple[int, int], seed: int) -> Path:
     slug = "".join(ch if ch.isalnum() else "-" for ch in name.split(" (")[0])
-    out = cache / f"optics-{size[0]}x{size[1]}-{slug}-{seed}"
-    if not (out / "truth" / "truth.json").exists():
-        rig = default_rig(size, 40)
-        p = rig.projector
-        if "sigma" in variant:
-            p = replace(p, sigma=variant["sigma"])
-        if "fan" in variant:
-            p = replace(p, stripe_x=p.stripe_x * variant["fan"])
-        t0 = time.perf_counter()
-        write_capture(out, stripes=40, size=size, seed=seed, scenes=("side", "top"), poses=0, fur=True,
-                      rig=Rig(rig.intrinsics, p), light=variant.get("light"), scene=variant.get("scene"))
-        if "jpeg" in variant:  # the same frames through a lossy camera pipeline, decoded again
-            for view in ("side", "top"):
-                path = out / "scan" / f"{view}.png"
-                ok, buf = cv2.imencode(".jpg", cv2.imread(str(path), cv2.IMREAD_UNCHANGED),
-                                       [cv2.IMWRITE_JPEG_QUALITY, variant["jpeg"]])
-                cv2.imwrite(str(path), cv2.imdecode(buf, cv2.IMREAD_UNCHANGED))
-        print(f"  rendered {out.name} in {time.perf_counter() - t0:.0f} s", flush=True)
-    return out
+    rig = default_rig(size, 40)
+    p = rig.projector
+    if "sigma" in variant:
+        p = replace(p, sigma=variant["sigma"])
+    if "fan" in variant:
+        p = replace(p, stripe_x=p.stripe_x * variant["fan"])
 
+    def through_jpeg(out: Path) -> None:  # the same frames through a lossy camera pipeline, decoded again
+        for view in VIEWS:
+            path = out / "scan" / f"{view}.png"
+            _, buf = cv2.imencode(".jpg", cv2.imread(str(path), cv2.IMREAD_UNCHANGED),
+                                   [cv2.IMWRITE_JPEG_QUALITY, variant["jpeg"]])
+            cv2.imwrite(str(path), cv2.imdecode(buf, cv2.IMREAD_UNCHANGED))
+
+    return cached_capture(cache / f"optics-{size[0]}x{size[1]}-{slug}-{seed}", through_jpeg if "jpeg" in variant else None,
+                          stripes=40, size=size, seed=seed, fur=True, rig=Rig(rig.intrinsics, p),
+                          light=variant.get("light"), scene=variant.get("scene"))
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -85,7 +80,7 @@ def main() -> None:
     good = total = 0
     for name, variant in VARIANTS.items():
         cap = capture_for(cache, name, variant, size, args.seed)
-        for view in ("side", "top"):
+        for view in VIEWS:
             total += 1
             s = label_view(cap, view)
             try:

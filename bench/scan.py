@@ -26,25 +26,20 @@ import trimesh
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench.common import cached_capture  # noqa: E402
 from measurement.body import measure  # noqa: E402
 from measurement.calibration import load_calibration  # noqa: E402
 from measurement.images import read_image  # noqa: E402
 from measurement.paper import gray_centres_literal  # noqa: E402
 from measurement.pipeline import scan  # noqa: E402
-from measurement.simulate.capture import write_capture  # noqa: E402
 from measurement.simulate.truth import match_crossings  # noqa: E402
 
 ANIMAL = 5
 
 
 def capture_for(cache: Path, stripes: int, fur: bool, size: tuple[int, int], seed: int) -> Path:
-    out = cache / f"scan-{size[0]}x{size[1]}-{stripes}-{'fur' if fur else 'clean'}-{seed}"
-    if not (out / "truth" / "truth.json").exists():
-        t0 = time.perf_counter()
-        write_capture(out, stripes=stripes, size=size, seed=seed, scenes=("side", "top"), poses=0, fur=fur)
-        print(f"  rendered {out.name} in {time.perf_counter() - t0:.0f} s", flush=True)
-    return out
-
+    return cached_capture(cache / f"scan-{size[0]}x{size[1]}-{stripes}-{'fur' if fur else 'clean'}-{seed}",
+                          stripes=stripes, size=size, seed=seed, fur=fur)
 
 def evaluate(cap: Path, view: str) -> dict:
     cal = load_calibration(cap / "truth" / "truth.json")

@@ -41,13 +41,6 @@ def near_planes(points: np.ndarray, bg_planes: np.ndarray, tol_mm: float = 8.0) 
     return np.nan_to_num(d, nan=np.inf).min(axis=1) < tol_mm
 
 
-def on_plane_fractions(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray, tol_mm: float
-                        ) -> np.ndarray:
-    """(N,) share of the rays (m, 3) whose point on light plane k lies within ``tol_mm`` of a background
-    plane, for every k at once."""
-    return _near_any_plane(rays, planes, bg_planes, tol_mm).mean(axis=0)
-
-
 def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray, tol_mm: float,
                     depth: np.ndarray | None = None, chunk: int = 4096) -> np.ndarray:
     """(m, N) True where ray i's point on light plane k lies within ``tol_mm`` of a background plane.
@@ -81,7 +74,8 @@ def _near_exact(points: np.ndarray, normals: np.ndarray, d: np.ndarray, tol_mm: 
 
 
 def _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm, depth=None):
-    """on_plane_fractions of each segment in ``sids`` (S,) (all of its centres): (S, N), and the
+    """Per segment in ``sids`` (S,) and light plane (N,): the share of its centres whose point on that
+    plane lies within ``tol_mm`` of a background plane, (S, N); and the
     centres (K,) grouped by segment in the order of ``sids``, with their group starts (S + 1,).
     depth : (M, N) depth_for_labels(rays, planes) of all centres when already known"""
     member = np.zeros(seg.max() + 1, bool)
@@ -134,12 +128,6 @@ def segments_on_planes(rays, planes, seg, seg_label: dict[int, int], bg_planes, 
     sids = np.fromiter(seg_label.keys(), np.int64)
     on = np.bincount(seg[idx], weights=near)[sids] / np.bincount(seg[idx])[sids] >= share
     return set(sids[on].tolist())
-
-
-def segment_on_planes(rays, planes, seg, sid, k, bg_planes, share: float = 0.9) -> bool:
-    """Whether segment ``sid`` on light plane ``k`` lies on the background planes (one segment of
-    ``segments_on_planes``)."""
-    return sid in segments_on_planes(rays, planes, seg, {int(sid): int(k)}, bg_planes, share)
 
 
 def split_foreground(c, seg, labels, on_bg, link, min_rows):

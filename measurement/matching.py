@@ -223,9 +223,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         _grow_all(c, rays, planes, seg, trial, remaining, left, right, tol, n, None, depth_only=True)
         in_trial = np.zeros(seg.max() + 1, bool)
         in_trial[np.fromiter(trial, np.int64)] = True
-        _refine(c, rays, planes, seg, trial, remaining & in_trial[seg], left, right, tol, n)
-        in_trial[:] = False
-        in_trial[np.fromiter(trial, np.int64)] = True
+        _refine(c, rays, planes, seg, trial, remaining & in_trial[seg], left, right, tol, n)  # members stay
         in_cluster = in_trial[seg] & remaining
         remaining &= ~in_cluster
         biggest = max(biggest, int(in_cluster.sum()))
@@ -279,6 +277,7 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
     in_mask[np.unique(seg[mask])] = True
     is_animal = np.zeros(seg.max() + 1, bool)
     is_animal[np.fromiter(animal, np.int64, len(animal))] = True
+    span = 4.0 * (float(c.u.max()) + link_px + 1.0)  # row key stride: wider than any column plus the link
     for _ in range(rounds):
         done: dict[int, int] = {}
         src = np.flatnonzero(is_animal & (table >= 0))
@@ -290,7 +289,6 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
             b = b_end[dst]
             # candidate pairs: b's end is one or two rows past a's, within link_px columns; ends are
             # keyed by row and column together, so a row where many stripes end costs nothing extra
-            span = 4.0 * (float(c.u.max()) + link_px + 1.0)
             key_a = c.v[a] * span + c.u[a]
             srt = np.argsort(key_a)
             key_sorted = key_a[srt]
@@ -378,10 +376,7 @@ def _placed(trial: dict[int, int], rel: np.ndarray, off: int, n: int) -> dict[in
 
 def _labels_of(seg: np.ndarray, seg_label: dict[int, int], long_seg: np.ndarray) -> np.ndarray:
     """Per-centre labels (M,) from a segment -> label map; -1 for short segments and unlabelled ones."""
-    lab = np.full(seg.max() + 1, -1, np.int64)
-    if seg_label:
-        lab[np.fromiter(seg_label.keys(), np.int64)] = np.fromiter(seg_label.values(), np.int64)
-    out = lab[seg]
+    out = _label_table(seg, seg_label)[seg]
     out[~long_seg] = -1
     return out
 
@@ -472,18 +467,11 @@ def _label_table(seg: np.ndarray, seg_label: dict[int, int]) -> np.ndarray:
     return table
 
 
-def _grow(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, depth_only=False,
-          relabel=False, min_share=0.6, gaps=(1, 2, 3)) -> dict[int, int]:
-    """Labels for unlabelled segments that continue a labelled neighbour's surface (one round). With
-    ``relabel`` the labelled segments in ``long_seg`` are re-voted by their neighbours instead."""
-    return _votes(rays, planes, _label_table(seg, seg_label), _neighbour_pairs(seg, long_seg, left, right),
-                  tol_mm, n, depth_only, relabel, min_share, gaps)
-
-
 def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, min_share, gaps,
            active: np.ndarray | None = None, slope: bool = False) -> dict[int, int]:
-    """One round of ``_grow`` on label ``table`` (S,) and neighbour ``pairs``, for the segments flagged in
-    ``active`` (S,) (all when None)."""
+    """One round of voting on label ``table`` (S,) by neighbour ``pairs``: segment -> label for the
+    segments (unlabelled ones, or with ``relabel`` labelled ones) whose row neighbours agree on a label
+    that continues their surface, for the segments flagged in ``active`` (S,) (all when None)."""
     voters, votes = [], []
     for idx, nbr, sign, own_seg, nb_seg, far, far_seg in pairs:
         if active is not None:  # the few pairs of active segments first, in their order

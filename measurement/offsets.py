@@ -55,6 +55,11 @@ def _in_sorted(x: np.ndarray, sorted_values: np.ndarray) -> np.ndarray:
     return sorted_values[pos] == x
 
 
+def _thinned(idx: np.ndarray, most: int = 20000) -> np.ndarray:
+    """``idx`` (K,), every j-th entry when there are more than ``most`` (a piece's shape survives it)."""
+    return idx if len(idx) <= most else idx[:: len(idx) // most + 1]
+
+
 def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, bins: float = 0.002,
                       residue: float = 0.5, pattern_edge: float = 0.02, beside_placed: bool = False,
                       lit: np.ndarray | None = None, background: np.ndarray | None = None) -> int | None:
@@ -96,7 +101,7 @@ def behind_background(rays, planes, r, idx, n, background: np.ndarray, off: int,
                       ) -> float:
     """The share of the piece (relative labels ``r[idx]``) that offset ``off`` puts more than
     ``margin_mm`` behind a background plane (P, 4), on the side away from the camera."""
-    sub = idx if len(idx) <= 20000 else idx[:: len(idx) // 20000 + 1]
+    sub = _thinned(idx)
     k = r[sub] + off
     inside = (k >= 0) & (k < n)
     if not inside.any():
@@ -130,7 +135,7 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
     deep = lit[_in_sorted(lit - 2, lit) & _in_sorted(lit + 2, lit) & _in_sorted(lit - 1, lit)
                & _in_sorted(lit + 1, lit)]  # sorted too
     rr = r[idx]
-    sub = idx if len(idx) <= 20000 else idx[:: len(idx) // 20000 + 1]
+    sub = _thinned(idx)
     offs = np.arange(-int(rr.max()), n - int(rr.min()))
     k = r[sub][None, :] + offs[:, None]  # (O, S) the stripe of each centre at each offset
     inside = (k >= 0) & (k < n)
