@@ -34,6 +34,7 @@ from .background import (
 from .detection import Centres, reliable
 from .offsets import (
     conflict_curve,
+    in_sorted,
     lit_cells,
     occlusion_offset,
     projector_elevation,
@@ -322,7 +323,7 @@ def _lit_share(rays, planes, seg, sid, k, lit) -> float:
     p = intersect(rays[ii], planes[np.full(len(ii), k)])
     e = np.floor(projector_elevation(p, planes) / 0.002).astype(np.int64)
     cells = k * 1_000_000 + e
-    return float((np.isin(cells, lit) & np.isin(cells - 1, lit) & np.isin(cells + 1, lit)).mean())
+    return float((in_sorted(cells, lit) & in_sorted(cells - 1, lit) & in_sorted(cells + 1, lit)).mean())
 
 
 def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, known, lit) -> dict[int, int]:

@@ -47,7 +47,7 @@ def _elevation(points: np.ndarray, centre: np.ndarray, a: np.ndarray) -> np.ndar
     return along / np.maximum(across, 1e-9)
 
 
-def _in_sorted(x: np.ndarray, sorted_values: np.ndarray) -> np.ndarray:
+def in_sorted(x: np.ndarray, sorted_values: np.ndarray) -> np.ndarray:
     """``np.isin(x, sorted_values)`` for a sorted array, without sorting it again."""
     if len(sorted_values) == 0:
         return np.zeros(len(x), bool)
@@ -132,8 +132,8 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
         return None
     if lit is None:
         lit = lit_cells(rays, planes, cl, bg, bins)
-    deep = lit[_in_sorted(lit - 2, lit) & _in_sorted(lit + 2, lit) & _in_sorted(lit - 1, lit)
-               & _in_sorted(lit + 1, lit)]  # sorted too
+    deep = lit[in_sorted(lit - 2, lit) & in_sorted(lit + 2, lit) & in_sorted(lit - 1, lit)
+               & in_sorted(lit + 1, lit)]  # sorted too
     rr = r[idx]
     sub = _thinned(idx)
     offs = np.arange(-int(rr.max()), n - int(rr.min()))
@@ -173,7 +173,7 @@ def _distinct_cells(group: np.ndarray, stripe: np.ndarray, e: np.ndarray, groups
         in_deep[dk[use] * bins + de[use]] = True
         return np.count_nonzero(mark, axis=1), np.count_nonzero(mark & in_deep, axis=1)
     both = np.unique(np.column_stack([group, stripe * 1_000_000 + e]), axis=0)
-    hits = np.bincount(both[:, 0], weights=_in_sorted(both[:, 1], deep), minlength=groups)
+    hits = np.bincount(both[:, 0], weights=in_sorted(both[:, 1], deep), minlength=groups)
     return np.bincount(both[:, 0], minlength=groups), hits.astype(np.int64)
 
 
