@@ -392,7 +392,9 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
     pairs = _open_pairs(_neighbour_pairs(seg, long_seg, left, right), table)
     active = None
     for _ in range(40):
-        new = _votes(rays, planes, table, pairs, tol_mm, n, depth_only, False, min_share, gaps, active, slope)
+        steps = _segment_steps(seg, rays, planes, table, left, right, tol_mm) if slope else None
+        new = _votes(rays, planes, table, pairs, tol_mm, n, depth_only, False, min_share, gaps, active, slope,
+                     steps)
         if bg_planes is not None and new:
             on = segments_on_planes(rays, planes, seg, new, bg_planes)
             new = {s: k for s, k in new.items() if s in on}
@@ -413,6 +415,29 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
         for _, _, _, own_seg, nb_seg, _, _ in pairs:
             active[own_seg[newly[nb_seg]]] = True
     return _labels_of(seg, seg_label, long_seg)
+
+
+def _segment_steps(seg, rays, planes, table, left, right, tol_mm, min_rows: int = 3
+                   ) -> dict[int, np.ndarray]:
+    """Per side (1: toward the left neighbour, -1: the right): each labelled segment's mean depth step (S,)
+    from its row neighbour on that side, on the next stripe, to itself (mm; NaN where fewer than
+    ``min_rows`` rows measure one, or the step exceeds 2 ``tol_mm``: a depth edge, not a slope)."""
+    out = {}
+    idx = np.flatnonzero(table[seg] >= 0)
+    k = table[seg[idx]]
+    z = depth_on(rays[idx], planes[k])
+    for sign, nb in ((1, left), (-1, right)):
+        f = nb[idx]
+        has = f >= 0
+        kf = np.where(has, table[seg[np.maximum(f, 0)]], -1)
+        ok = has & (kf == k - sign) & (kf >= 0)
+        step = np.zeros(len(idx))
+        step[ok] = z[ok] - depth_on(rays[f[ok]], planes[kf[ok]])
+        ok &= np.abs(step) < 2 * tol_mm
+        cnt = np.bincount(seg[idx[ok]], minlength=len(table))
+        tot = np.bincount(seg[idx[ok]], weights=step[ok], minlength=len(table))
+        out[sign] = np.where(cnt >= min_rows, tot / np.maximum(cnt, 1), np.nan)
+    return out
 
 
 def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
@@ -469,7 +494,8 @@ def _label_table(seg: np.ndarray, seg_label: dict[int, int]) -> np.ndarray:
 
 
 def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, min_share, gaps,
-           active: np.ndarray | None = None, slope: bool = False) -> dict[int, int]:
+           active: np.ndarray | None = None, slope: bool = False,
+           seg_steps: dict[int, np.ndarray] | None = None) -> dict[int, int]:
     """One round of voting on label ``table`` (S,) by neighbour ``pairs``: segment -> label for the
     segments (unlabelled ones, or with ``relabel`` labelled ones) whose row neighbours agree on a label
     that continues their surface, for the segments flagged in ``active`` (S,) (all when None)."""
@@ -507,6 +533,10 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
                     mean = np.bincount(nb_seg[vi], weights=step[vi], minlength=len(table)) / np.maximum(cnt, 1)
                     fill = ~has & (cnt[nb_seg] >= 3)
                     step[fill] = mean[nb_seg[fill]]
+                if seg_steps is not None:  # else the neighbour segment's own mean step over all its rows
+                    own_step = seg_steps[sign][nb_seg]
+                    rest = ~has & (step == 0.0) & np.isfinite(own_step)
+                    step[rest] = own_step[rest]
         else:
             pn = intersect(rays[nbr], planes[kn])
         # the voters' points on the planes of every gap at once (row by row as one gap at a time)

@@ -59,19 +59,21 @@ def test_our_labels_beat_the_paper_on_the_animal(small_capture, side):
     assert right(paper) < right(ours)  # image continuity carries the wall's indices into the body
 
 
-def _steep_ramp(slope: float, stripes: range, rows: np.ndarray):
+def _steep_ramp(slope: float, stripes: range, rows):
     """Exact centres of the reference rig's stripes on a surface z = 1100 + slope * x (mm), one segment per
-    stripe: rays (M, 3), segment ids, row neighbours and true labels."""
+    stripe: rays (M, 3), segment ids, row neighbours and true labels. rows : (R,) rows of every stripe, or
+    a function stripe -> its rows."""
     from measurement.simulate.rig import default_rig
 
     planes = default_rig((1536, 1024), 40).projector.planes_cam()
     rays, seg, lab, v = [], [], [], []
     for s, k in enumerate(stripes):
         n, d = planes[k, :3], planes[k, 3]
-        y = rows.astype(float)
+        k_rows = rows(k) if callable(rows) else rows
+        y = k_rows.astype(float)
         x = (d - n[1] * y - n[2] * 1100.0) / (n[0] + n[2] * slope)
         p = np.column_stack([x, y, 1100.0 + slope * x])
-        rays.append(p / p[:, 2:3]), seg.append(np.full(len(y), s)), lab.append(np.full(len(y), k)), v.append(rows)
+        rays.append(p / p[:, 2:3]), seg.append(np.full(len(y), s)), lab.append(np.full(len(y), k)), v.append(k_rows)
     rays, seg, lab, v = np.vstack(rays), np.concatenate(seg), np.concatenate(lab), np.concatenate(v)
     order = np.lexsort((rays[:, 0], v))
     rays, seg, lab, v = rays[order], seg[order], lab[order], v[order]
@@ -99,6 +101,26 @@ def test_growth_follows_a_steep_surface_by_its_depth_step():
         got = out >= 0
         assert (out[got] == lab[got]).all()
         assert got.all() == expect_all
+
+
+def test_growth_down_a_tail_tip_takes_the_neighbours_step_from_its_own_rows():
+    """Toward a tail's tip each stripe ends lower, so a stripe's rows beside its labelled neighbour lie
+    past the rows where that neighbour has a neighbour of its own: the depth step measured on the
+    neighbour's other rows carries the growth on (it stopped there before)."""
+    from measurement.matching import _grow_all
+    from measurement.triangulation import depth_on
+
+    def rows(k: int) -> np.ndarray:  # stripe k overlaps k + 1 by 8 rows and never meets k + 2
+        return np.arange(8 * (15 - k) - 40, 8 * (15 - k) - 24, 2)
+
+    planes, rays, seg, left, right, lab = _steep_ramp(-1.2, range(10, 16), rows)
+    step = np.abs(np.diff([depth_on(rays[lab == k][:1], planes[k:k + 1])[0] for k in range(10, 16)]))
+    tol = 0.8 * float(step.min())
+    long_seg = np.ones(len(seg), bool)
+    seg_label = {5: 15, 4: 14}
+    out = _grow_all(None, rays, planes, seg, seg_label, long_seg, left, right, tol, 40, None,
+                    depth_only=True, gaps=(1,), min_share=0.8, slope=True)
+    assert (out == lab).all()
 
 
 def test_a_stripe_cut_along_its_length_keeps_its_label_but_stray_specks_do_not():
