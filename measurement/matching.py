@@ -33,6 +33,7 @@ from .background import (
 )
 from .detection import Centres, reliable
 from .offsets import (
+    behind_background,
     conflict_curve,
     in_sorted,
     lit_cells,
@@ -169,8 +170,9 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
         seg_label.update(claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, depth=z_all))
     # 4: foreground clusters: relative labels by growing from a seed, offset from the shadow they cast
     weighed = np.zeros(m, bool)
-    fg_labels, small, cl, lit = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n,
-                                            z_all, weighed, params.depth_range_mm, bg_planes)
+    bg_labels = dict(seg_label)
+    fg_labels, small, cl, lit, first = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol,
+                                                   n, z_all, weighed, params.depth_range_mm, bg_planes)
     if fg_labels:
         # pieces of the animal without shadow evidence of their own continue a labelled piece's surface
         is_bg = np.zeros(seg.max() + 1, bool)
@@ -186,6 +188,12 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
                                          0.25 * spacing_mm, lit))
     if fg_labels and small:  # isolated small pieces (a head seen from above) hemmed in by what is placed
         seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit))
+    if fg_labels and first is not None:  # the whole animal weighed again, with what joined after the first piece
+        fg = {s: k for s, k in seg_label.items() if s not in bg_labels}
+        shift = _whole_animal_shift(c, rays, planes, seg, bg_labels, fg, fg_mask, long_seg, left, right, tol, n,
+                                    bg_planes, first)
+        if shift:
+            seg_label = {**bg_labels, **{s: k + shift for s, k in fg.items() if 0 <= k + shift < n}}
     labels = _labels_of(seg, seg_label, long_seg)
     ok = labels >= 0
     zmin, zmax = params.depth_range_mm
@@ -196,10 +204,11 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
 
 
 def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, weighed, zrange,
-                bg_planes=None) -> tuple[dict[int, int], list, np.ndarray, np.ndarray]:
+                bg_planes=None) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None]:
     """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
     (M,) the centres of every piece that was weighed for an offset. Also returns the per-centre labels
-    (M,) of the background and the placed pieces, and the projector cells they light (``lit_cells``).
+    (M,) of the background and the placed pieces, the projector cells they light (``lit_cells``) and the
+    centres (K,) of the first piece placed (None if none was).
 
     Each piece gets relative indices by depth continuity from a seed (the longest segment left) and is
     placed from its conflict curve, with the pieces placed before it counting as lit; pieces under
@@ -215,6 +224,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     biggest = 0
     placed_max = 0  # centres in the largest piece placed so far
     small = []
+    first = None
     while remaining.sum() >= 50:
         sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)
         seed = int(np.argmax(sizes))
@@ -248,8 +258,39 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
             continue
         out.update(_placed(trial, rel, off, n))
         lit = _claim(rays, planes, cl, lit, idx, lab)
+        first = idx if first is None else first
         placed_max = max(placed_max, len(idx))
-    return out, small, cl, lit
+    return out, small, cl, lit, first
+
+
+def _whole_animal_shift(c, rays, planes, seg, bg_labels, fg_labels, fg_mask, long_seg, left, right, tol, n,
+                        bg_planes, first, max_behind: float = 0.001) -> int:
+    """Stripes (0 or a shift away from the conflicts) by which to move every animal label in ``fg_labels``
+    (segment -> label), from the conflict curve of all of them together against the background's cells.
+
+    The first piece's offset was read from its own outline; an extremity on the lit side that joined only
+    later (a tail seen from above, linked again only after growth, continuation or a small piece) leaves
+    that piece a stripe of slack toward its conflicts, and with a noisy sensor or a bright room it takes
+    it. The labels are grown once more for this weighing only (slope growth from every placed piece), the
+    shift is taken only away from the conflicts (the direction that slack errs in; toward them, the
+    whole animal's stray centres would be read as a ramp), and never where the first piece's centres
+    ``first`` (K,) would put more than ``max_behind`` of themselves behind the floor or wall."""
+    grown = dict(fg_labels)
+    _grow_all(c, rays, planes, seg, grown, fg_mask, left, right, tol, n, None, depth_only=True, gaps=(1,),
+              min_share=0.8, slope=True)
+    r = _labels_of(seg, grown, long_seg)
+    idx = np.flatnonzero(r >= 0)
+    if len(idx) < 50:
+        return 0
+    right_side = projector_right(planes)
+    shift = occlusion_offset(rays, planes, _labels_of(seg, bg_labels, long_seg), np.maximum(r, 0), idx, n,
+                             right_side)
+    if not shift or (shift > 0) != right_side:
+        return 0
+    if bg_planes is not None and behind_background(rays, planes, np.maximum(r, 0), first, n, bg_planes,
+                                                   shift) > max_behind:
+        return 0
+    return int(shift)
 
 
 def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px, tol_mm,
