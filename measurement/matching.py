@@ -391,8 +391,11 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
     table = _label_table(seg, seg_label)
     pairs = _open_pairs(_neighbour_pairs(seg, long_seg, left, right), table)
     active = None
+    steps: dict[int, np.ndarray] | None = None
+    since = None
     for _ in range(40):
-        steps = _segment_steps(seg, rays, planes, table, left, right, tol_mm) if slope else None
+        if slope:
+            steps = _segment_steps(seg, rays, planes, table, left, right, tol_mm, since)
         new = _votes(rays, planes, table, pairs, tol_mm, n, depth_only, False, min_share, gaps, active, slope,
                      steps)
         if bg_planes is not None and new:
@@ -414,16 +417,22 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
         active = np.zeros(len(table), bool)
         for _, _, _, own_seg, nb_seg, _, _ in pairs:
             active[own_seg[newly[nb_seg]]] = True
+        if steps is not None:
+            since = (steps, _touching(seg, left, right, newly))
     return _labels_of(seg, seg_label, long_seg)
 
 
-def _segment_steps(seg, rays, planes, table, left, right, tol_mm, min_rows: int = 3
+def _segment_steps(seg, rays, planes, table, left, right, tol_mm,
+                   since: tuple[dict[int, np.ndarray], np.ndarray] | None = None, min_rows: int = 3
                    ) -> dict[int, np.ndarray]:
     """Per side (1: toward the left neighbour, -1: the right): each labelled segment's mean depth step (S,)
     from its row neighbour on that side, on the next stripe, to itself (mm; NaN where fewer than
-    ``min_rows`` rows measure one, or the step exceeds 2 ``tol_mm``: a depth edge, not a slope)."""
+    ``min_rows`` rows measure one, or the step exceeds 2 ``tol_mm``: a depth edge, not a slope).
+    ``since`` : the steps of an earlier ``table`` that has only gained labels since, and the segments (S,)
+    to measure again (``_touching`` the new ones); the others keep their earlier steps."""
     out = {}
-    idx = np.flatnonzero(table[seg] >= 0)
+    labelled = table[seg] >= 0
+    idx = np.flatnonzero(labelled if since is None else labelled & since[1][seg])
     k = table[seg[idx]]
     z = depth_on(rays[idx], planes[k])
     for sign, nb in ((1, left), (-1, right)):
@@ -437,6 +446,17 @@ def _segment_steps(seg, rays, planes, table, left, right, tol_mm, min_rows: int 
         cnt = np.bincount(seg[idx[ok]], minlength=len(table))
         tot = np.bincount(seg[idx[ok]], weights=step[ok], minlength=len(table))
         out[sign] = np.where(cnt >= min_rows, tot / np.maximum(cnt, 1), np.nan)
+        if since is not None:
+            out[sign] = np.where(since[1], out[sign], since[0][sign])
+    return out
+
+
+def _touching(seg: np.ndarray, left: np.ndarray, right: np.ndarray, flags: np.ndarray) -> np.ndarray:
+    """(S,) the segments flagged in ``flags`` (S,) and those with a centre beside one of theirs in its row."""
+    out = flags.copy()
+    members = np.flatnonzero(flags[seg])
+    for nb in (left[members], right[members]):
+        out[seg[nb[nb >= 0]]] = True
     return out
 
 
