@@ -209,26 +209,29 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     labelled = np.zeros(seg.max() + 1, bool)
     labelled[list(seg_label)] = True
     remaining = long_seg & ~labelled[seg]
+    sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)  # centres left per segment
+    pool = _neighbour_pairs(seg, remaining, left, right)  # of the centres left
     cl = _labels_of(seg, seg_label, long_seg)
     lit = lit_cells(rays, planes, cl, np.nonzero(cl >= 0)[0])
     mid = n // 2
     biggest = 0
     placed_max = 0  # centres in the largest piece placed so far
     small = []
-    while remaining.sum() >= 50:
-        sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)
+    while sizes.sum() >= 50:
         seed = int(np.argmax(sizes))
         if sizes[seed] < 30:  # only specks and stubs are left: too short to seed a piece of the animal
             break
         trial = {seed: mid}
-        _grow_all(c, rays, planes, seg, trial, remaining, left, right, tol, n, None, depth_only=True)
+        _grow_all(c, rays, planes, seg, trial, remaining, left, right, tol, n, None, depth_only=True, pairs=pool)
         in_trial = np.zeros(seg.max() + 1, bool)
         in_trial[np.fromiter(trial, np.int64)] = True
-        _refine(c, rays, planes, seg, trial, remaining & in_trial[seg], left, right, tol, n)  # members stay
+        _refine(rays, planes, seg, trial, _subset(pool, [in_trial[p[3]] for p in pool]), tol, n)  # members stay
         in_cluster = in_trial[seg] & remaining
         remaining &= ~in_cluster
-        biggest = max(biggest, int(in_cluster.sum()))
         idx = np.nonzero(in_cluster)[0]
+        sizes -= np.bincount(seg[idx], minlength=len(sizes))
+        pool = _subset(pool, [remaining[p[0]] for p in pool])
+        biggest = max(biggest, len(idx))
         if len(idx) < max(50, SMALL_PIECE * biggest):  # too little shadow evidence of its own
             if len(idx) >= 50:
                 small.append((idx, dict(trial)))
@@ -383,17 +386,22 @@ def _labels_of(seg: np.ndarray, seg_label: dict[int, int], long_seg: np.ndarray)
 
 
 def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, bg_planes=None,
-              depth_only=False, avoid_planes=None, gaps=(1, 2, 3), min_share=0.6, slope=False) -> np.ndarray:
+              depth_only=False, avoid_planes=None, gaps=(1, 2, 3), min_share=0.6, slope=False,
+              pairs: _Pairs | None = None) -> np.ndarray:
     """Grow labels along continuous surfaces until nothing changes; returns per-centre labels.
     With ``bg_planes`` a segment only joins when its points then lie on those planes; with
     ``avoid_planes`` only when they do not. With ``slope`` (depth only) the neighbour's depth is
-    extrapolated by its own step from the stripe beyond it, so a steep surface keeps growing."""
+    extrapolated by its own step from the stripe beyond it, so a steep surface keeps growing.
+    ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``, when already known."""
     table = _label_table(seg, seg_label)
-    pairs = _open_pairs(_neighbour_pairs(seg, long_seg, left, right), table)
-    active = None
+    pairs = _open_pairs(_neighbour_pairs(seg, long_seg, left, right) if pairs is None else pairs, table)
+    newly = table >= 0
     steps: dict[int, np.ndarray] | None = None
     since = None
     for _ in range(40):
+        # only segments beside a newly labelled one can vote differently from the round before; the others
+        # would repeat its outcome (no label, or one the plane test refused)
+        active = _beside(pairs, newly)
         if slope:
             steps = _segment_steps(seg, rays, planes, table, left, right, tol_mm, since)
         new = _votes(rays, planes, table, pairs, tol_mm, n, depth_only, False, min_share, gaps, active, slope,
@@ -409,14 +417,8 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
         seg_label.update(new)
         grown = np.fromiter(new.keys(), np.int64, len(new))
         table[grown] = np.fromiter(new.values(), np.int64, len(new))
-        pairs = _open_pairs(pairs, table)
-        # only segments beside a newly labelled one can vote differently next round; the others would
-        # repeat this round's outcome (no label, or one the plane test refused)
         newly = np.zeros(len(table), bool)
         newly[grown] = True
-        active = np.zeros(len(table), bool)
-        for _, _, _, own_seg, nb_seg, _, _ in pairs:
-            active[own_seg[newly[nb_seg]]] = True
         if steps is not None:
             since = (steps, _touching(seg, left, right, newly))
     return _labels_of(seg, seg_label, long_seg)
@@ -498,11 +500,21 @@ def _neighbour_pairs(seg, mask, left, right) -> _Pairs:
 
 def _open_pairs(pairs: _Pairs, table: np.ndarray) -> _Pairs:
     """The ``pairs`` whose own segment has no label in ``table`` (S,) yet: only those can vote in growth."""
-    out = []
-    for idx, nbr, sign, own_seg, nb_seg, far, far_seg in pairs:
-        keep = table[own_seg] < 0
-        out.append((idx[keep], nbr[keep], sign, own_seg[keep], nb_seg[keep], far[keep], far_seg[keep]))
+    return _subset(pairs, [table[own_seg] < 0 for _, _, _, own_seg, _, _, _ in pairs])
+
+
+def _beside(pairs: _Pairs, flags: np.ndarray) -> np.ndarray:
+    """(S,) the own segments of the ``pairs`` whose neighbour's segment is flagged in ``flags`` (S,)."""
+    out = np.zeros(len(flags), bool)
+    for _, _, _, own_seg, nb_seg, _, _ in pairs:
+        out[own_seg[flags[nb_seg]]] = True
     return out
+
+
+def _subset(pairs: _Pairs, keep: list[np.ndarray]) -> _Pairs:
+    """Per side, the ``pairs`` flagged in that side's ``keep`` (K,)."""
+    return [(idx[k], nbr[k], sign, own_seg[k], nb_seg[k], far[k], far_seg[k])
+            for (idx, nbr, sign, own_seg, nb_seg, far, far_seg), k in zip(pairs, keep, strict=True)]
 
 
 def _label_table(seg: np.ndarray, seg_label: dict[int, int]) -> np.ndarray:
@@ -609,10 +621,10 @@ def _majority(voter: np.ndarray, vote: np.ndarray, n: int, min_share: float) -> 
     return dict(zip(segs[best].tolist(), labs[best].tolist(), strict=True))
 
 
-def _refine(c, rays, planes, seg, seg_label, mask, left, right, tol_mm, n, rounds: int = 3) -> None:
-    """Re-vote each labelled segment in ``mask`` by its neighbours; a clear majority for another label
-    (a growth step that took the wrong gap) replaces it. Updates ``seg_label`` in place."""
-    pairs = _neighbour_pairs(seg, mask, left, right)
+def _refine(rays, planes, seg, seg_label, pairs: _Pairs, tol_mm, n, rounds: int = 3) -> None:
+    """Re-vote each labelled segment by its neighbours (``pairs``: the ``_neighbour_pairs`` of its
+    centres); a clear majority for another label (a growth step that took the wrong gap) replaces it.
+    Updates ``seg_label`` in place."""
     table = _label_table(seg, seg_label)
     for _ in range(rounds):
         votes = _votes(rays, planes, table, pairs, tol_mm, n, True, True, 0.7, (1, 2, 3))
