@@ -156,7 +156,7 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     # onto the animal; such centres sit off the background surfaces: cut them off as foreground
     bg_planes = background_planes(rays, planes, labels)
     if bg_planes is not None:
-        on_bg = near_planes(intersect(rays, planes[np.clip(labels, 0, n - 1)]), bg_planes) & (labels >= 0)
+        on_bg = near_planes(intersect(rays, planes.take(np.clip(labels, 0, n - 1), axis=0)), bg_planes) & (labels >= 0)
         seg, long_seg, seg_label = split_foreground(c, seg, labels, on_bg, link, params.min_segment_rows)
     spacing_mm = _stripe_spacing_mm(c, rays, planes, seg, seg_label, left)
     tol = spacing_mm * params.continuity
@@ -305,7 +305,8 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
                     ai = srt[np.minimum(lo + off, len(a) - 1)][has]
                     bi = np.flatnonzero(has)
                     k = table[src[ai]]
-                    near = np.abs(depth_on(rays[a[ai]], planes[k]) - depth_on(rays[b[bi]], planes[k])) < tol_mm
+                    near = np.abs(depth_on(rays.take(a[ai], axis=0), planes.take(k, axis=0))
+                                  - depth_on(rays.take(b[bi], axis=0), planes.take(k, axis=0))) < tol_mm
                     for sid, lab in zip(dst[bi][near].tolist(), k[near].tolist(), strict=True):
                         if sid not in done and _lit_share(rays, planes, seg, sid, lab, lit) <= 0.25:
                             done[sid] = lab
@@ -436,14 +437,14 @@ def _segment_steps(seg, rays, planes, table, left, right, tol_mm,
     labelled = table[seg] >= 0
     idx = np.flatnonzero(labelled if since is None else labelled & since[1][seg])
     k = table[seg[idx]]
-    z = depth_on(rays[idx], planes[k])
+    z = depth_on(rays.take(idx, axis=0), planes.take(k, axis=0))
     for sign, nb in ((1, left), (-1, right)):
         f = nb[idx]
         has = f >= 0
         kf = np.where(has, table[seg[np.maximum(f, 0)]], -1)
         ok = has & (kf == k - sign) & (kf >= 0)
         step = np.zeros(len(idx))
-        step[ok] = z[ok] - depth_on(rays[f[ok]], planes[kf[ok]])
+        step[ok] = z[ok] - depth_on(rays.take(f[ok], axis=0), planes.take(kf[ok], axis=0))
         ok &= np.abs(step) < 2 * tol_mm
         cnt = np.bincount(seg[idx[ok]], minlength=len(table))
         tot = np.bincount(seg[idx[ok]], weights=step[ok], minlength=len(table))
@@ -470,8 +471,8 @@ def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
     idx = np.nonzero(have)[0]
     if len(idx) < 10:
         return 15.0
-    a = intersect(rays[idx], planes[lab[idx]])
-    b = intersect(rays[left[idx]], planes[lab[left[idx]]])
+    a = intersect(rays.take(idx, axis=0), planes.take(lab[idx], axis=0))
+    b = intersect(rays.take(left[idx], axis=0), planes.take(lab[left[idx]], axis=0))
     return float(np.median(np.linalg.norm(a - b, axis=1)))
 
 
@@ -543,7 +544,7 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
         if len(idx) == 0:
             continue
         if depth_only:
-            zn = depth_on(rays[nbr], planes[kn])
+            zn = depth_on(rays.take(nbr, axis=0), planes.take(kn, axis=0))
             if slope:
                 # a steep surface (a tail hanging toward its tip) changes depth by a similar step from stripe
                 # to stripe: extrapolate the neighbour's own step where its outer neighbour is the next stripe
@@ -551,7 +552,7 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
                 has = (kf == kn - sign) & (kf >= 0)
                 step = np.zeros(len(idx))
                 if has.any():
-                    zf = depth_on(rays[far[has]], planes[kf[has]])
+                    zf = depth_on(rays.take(far[has], axis=0), planes.take(kf[has], axis=0))
                     # only where the stripes are evenly spaced in the image too (no stripes missing between)
                     near_dx = np.abs(rays[idx[has], 0] - rays[nbr[has], 0])
                     far_dx = np.abs(rays[nbr[has], 0] - rays[far[has], 0])
@@ -570,15 +571,15 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
                     rest = ~has & (step == 0.0) & np.isfinite(own_step)
                     step[rest] = own_step[rest]
         else:
-            pn = intersect(rays[nbr], planes[kn])
+            pn = intersect(rays.take(nbr, axis=0), planes.take(kn, axis=0))
         # the voters' points on the planes of every gap at once (row by row as one gap at a time)
         ks = [kn + sign * gap for gap in gaps]
         on_k = np.concatenate([np.clip(k, 0, n - 1) for k in ks])
-        voter_rays = np.tile(rays[idx], (len(gaps), 1))
+        voter_rays = np.tile(rays.take(idx, axis=0), (len(gaps), 1))
         if depth_only:
-            z_gap = depth_on(voter_rays, planes[on_k]).reshape(len(gaps), -1)
+            z_gap = depth_on(voter_rays, planes.take(on_k, axis=0)).reshape(len(gaps), -1)
         else:
-            p_gap = intersect(voter_rays, planes[on_k]).reshape(len(gaps), -1, 3)
+            p_gap = intersect(voter_rays, planes.take(on_k, axis=0)).reshape(len(gaps), -1, 3)
         best_k = np.full(len(idx), -1)
         best_d = np.full(len(idx), np.inf)
         for g, gap in enumerate(gaps):
