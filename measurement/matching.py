@@ -574,7 +574,7 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
             pn = intersect(rays.take(nbr, axis=0), planes.take(kn, axis=0))
         # the voters' points on the planes of every gap at once (row by row as one gap at a time)
         ks = [kn + sign * gap for gap in gaps]
-        on_k = np.concatenate([np.clip(k, 0, n - 1) for k in ks])
+        on_k = np.clip(np.concatenate(ks), 0, n - 1)
         voter_rays = np.tile(rays.take(idx, axis=0), (len(gaps), 1))
         if depth_only:
             z_gap = depth_on(voter_rays, planes.take(on_k, axis=0)).reshape(len(gaps), -1)
