@@ -18,7 +18,7 @@ def background_planes(rays: np.ndarray, planes: np.ndarray, labels: np.ndarray, 
     idx = np.nonzero(labels >= 0)[0]
     if len(idx) < 200:
         return None
-    pts = intersect(rays[idx], planes[labels[idx]])
+    pts = intersect(rays.take(idx, axis=0), planes.take(labels[idx], axis=0))
     found = []
     rest = np.ones(len(idx), bool)
     rng = np.random.default_rng(0)
@@ -83,7 +83,8 @@ def _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm, dep
     idx = np.nonzero(member[seg])[0]
     idx = idx[np.argsort(seg[idx], kind="stable")]
     starts = np.searchsorted(seg[idx], sids)
-    near = _near_any_plane(rays[idx], planes, bg_planes, tol_mm, None if depth is None else depth[idx])
+    near = _near_any_plane(rays.take(idx, axis=0), planes, bg_planes, tol_mm,
+                           None if depth is None else depth.take(idx, axis=0))
     counts = np.add.reduceat(near, starts, axis=0, dtype=np.int64) if len(sids) else near[:0]
     sizes = np.diff(np.r_[starts, len(idx)])
     return counts / sizes[:, None], idx, np.r_[starts, len(idx)]
@@ -124,7 +125,7 @@ def segments_on_planes(rays, planes, seg, seg_label: dict[int, int], bg_planes, 
     table = np.full(seg.max() + 1, -1, np.int64)
     table[np.fromiter(seg_label.keys(), np.int64)] = np.fromiter(seg_label.values(), np.int64)
     idx = np.nonzero(table[seg] >= 0)[0]
-    near = near_planes(intersect(rays[idx], planes[table[seg[idx]]]), bg_planes)
+    near = near_planes(intersect(rays.take(idx, axis=0), planes.take(table[seg[idx]], axis=0)), bg_planes)
     sids = np.fromiter(seg_label.keys(), np.int64)
     on = np.bincount(seg[idx], weights=near)[sids] / np.bincount(seg[idx])[sids] >= share
     return set(sids[on].tolist())

@@ -157,7 +157,7 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     # onto the animal; such centres sit off the background surfaces: cut them off as foreground
     bg_planes = background_planes(rays, planes, labels)
     if bg_planes is not None:
-        on_bg = near_planes(intersect(rays, planes[np.clip(labels, 0, n - 1)]), bg_planes) & (labels >= 0)
+        on_bg = near_planes(intersect(rays, planes.take(np.clip(labels, 0, n - 1), axis=0)), bg_planes) & (labels >= 0)
         seg, long_seg, seg_label = split_foreground(c, seg, labels, on_bg, link, params.min_segment_rows)
     spacing_mm = _stripe_spacing_mm(c, rays, planes, seg, seg_label, left)
     tol = spacing_mm * params.continuity
@@ -218,6 +218,8 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     labelled = np.zeros(seg.max() + 1, bool)
     labelled[list(seg_label)] = True
     remaining = long_seg & ~labelled[seg]
+    sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)  # centres left per segment
+    pool = _neighbour_pairs(seg, remaining, left, right)  # of the centres left
     cl = _labels_of(seg, seg_label, long_seg)
     lit = lit_cells(rays, planes, cl, np.nonzero(cl >= 0)[0])
     mid = n // 2
@@ -225,20 +227,21 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     placed_max = 0  # centres in the largest piece placed so far
     small = []
     first = None
-    while remaining.sum() >= 50:
-        sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)
+    while sizes.sum() >= 50:
         seed = int(np.argmax(sizes))
         if sizes[seed] < 30:  # only specks and stubs are left: too short to seed a piece of the animal
             break
         trial = {seed: mid}
-        _grow_all(c, rays, planes, seg, trial, remaining, left, right, tol, n, None, depth_only=True)
+        _grow_all(c, rays, planes, seg, trial, remaining, left, right, tol, n, None, depth_only=True, pairs=pool)
         in_trial = np.zeros(seg.max() + 1, bool)
         in_trial[np.fromiter(trial, np.int64)] = True
-        _refine(c, rays, planes, seg, trial, remaining & in_trial[seg], left, right, tol, n)  # members stay
+        _refine(rays, planes, seg, trial, _subset(pool, [in_trial[p[3]] for p in pool]), tol, n)  # members stay
         in_cluster = in_trial[seg] & remaining
         remaining &= ~in_cluster
-        biggest = max(biggest, int(in_cluster.sum()))
         idx = np.nonzero(in_cluster)[0]
+        sizes -= np.bincount(seg[idx], minlength=len(sizes))
+        pool = _subset(pool, [remaining[p[0]] for p in pool])
+        biggest = max(biggest, len(idx))
         if len(idx) < max(50, SMALL_PIECE * biggest):  # too little shadow evidence of its own
             if len(idx) >= 50:
                 small.append((idx, dict(trial)))
@@ -343,7 +346,8 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
                     ai = srt[np.minimum(lo + off, len(a) - 1)][has]
                     bi = np.flatnonzero(has)
                     k = table[src[ai]]
-                    near = np.abs(depth_on(rays[a[ai]], planes[k]) - depth_on(rays[b[bi]], planes[k])) < tol_mm
+                    near = np.abs(depth_on(rays.take(a[ai], axis=0), planes.take(k, axis=0))
+                                  - depth_on(rays.take(b[bi], axis=0), planes.take(k, axis=0))) < tol_mm
                     for sid, lab in zip(dst[bi][near].tolist(), k[near].tolist(), strict=True):
                         if sid not in done and _lit_share(rays, planes, seg, sid, lab, lit) <= 0.25:
                             done[sid] = lab
@@ -424,16 +428,24 @@ def _labels_of(seg: np.ndarray, seg_label: dict[int, int], long_seg: np.ndarray)
 
 
 def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, bg_planes=None,
-              depth_only=False, avoid_planes=None, gaps=(1, 2, 3), min_share=0.6, slope=False) -> np.ndarray:
+              depth_only=False, avoid_planes=None, gaps=(1, 2, 3), min_share=0.6, slope=False,
+              pairs: _Pairs | None = None) -> np.ndarray:
     """Grow labels along continuous surfaces until nothing changes; returns per-centre labels.
     With ``bg_planes`` a segment only joins when its points then lie on those planes; with
     ``avoid_planes`` only when they do not. With ``slope`` (depth only) the neighbour's depth is
-    extrapolated by its own step from the stripe beyond it, so a steep surface keeps growing."""
+    extrapolated by its own step from the stripe beyond it, so a steep surface keeps growing.
+    ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``, when already known."""
     table = _label_table(seg, seg_label)
-    pairs = _open_pairs(_neighbour_pairs(seg, long_seg, left, right), table)
-    active = None
+    pairs = _open_pairs(_neighbour_pairs(seg, long_seg, left, right) if pairs is None else pairs, table)
+    newly = table >= 0
+    steps: dict[int, np.ndarray] | None = None
+    since = None
     for _ in range(40):
-        steps = _segment_steps(seg, rays, planes, table, left, right, tol_mm) if slope else None
+        # only segments beside a newly labelled one can vote differently from the round before; the others
+        # would repeat its outcome (no label, or one the plane test refused)
+        active = _beside(pairs, newly)
+        if slope:
+            steps = _segment_steps(seg, rays, planes, table, left, right, tol_mm, since)
         new = _votes(rays, planes, table, pairs, tol_mm, n, depth_only, False, min_share, gaps, active, slope,
                      steps)
         if bg_planes is not None and new:
@@ -447,37 +459,48 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
         seg_label.update(new)
         grown = np.fromiter(new.keys(), np.int64, len(new))
         table[grown] = np.fromiter(new.values(), np.int64, len(new))
-        pairs = _open_pairs(pairs, table)
-        # only segments beside a newly labelled one can vote differently next round; the others would
-        # repeat this round's outcome (no label, or one the plane test refused)
         newly = np.zeros(len(table), bool)
         newly[grown] = True
-        active = np.zeros(len(table), bool)
-        for _, _, _, own_seg, nb_seg, _, _ in pairs:
-            active[own_seg[newly[nb_seg]]] = True
+        if steps is not None:
+            since = (steps, _touching(seg, left, right, newly))
     return _labels_of(seg, seg_label, long_seg)
 
 
-def _segment_steps(seg, rays, planes, table, left, right, tol_mm, min_rows: int = 3
+def _segment_steps(seg, rays, planes, table, left, right, tol_mm,
+                   since: tuple[dict[int, np.ndarray], np.ndarray] | None = None, min_rows: int = 3
                    ) -> dict[int, np.ndarray]:
     """Per side (1: toward the left neighbour, -1: the right): each labelled segment's mean depth step (S,)
     from its row neighbour on that side, on the next stripe, to itself (mm; NaN where fewer than
-    ``min_rows`` rows measure one, or the step exceeds 2 ``tol_mm``: a depth edge, not a slope)."""
+    ``min_rows`` rows measure one, or the step exceeds 2 ``tol_mm``: a depth edge, not a slope).
+    ``since`` : the steps of an earlier ``table`` that has only gained labels since, and the segments (S,)
+    to measure again (``_touching`` the new ones); the others keep their earlier steps."""
     out = {}
-    idx = np.flatnonzero(table[seg] >= 0)
+    labelled = table[seg] >= 0
+    idx = np.flatnonzero(labelled if since is None else labelled & since[1][seg])
     k = table[seg[idx]]
-    z = depth_on(rays[idx], planes[k])
+    z = depth_on(rays.take(idx, axis=0), planes.take(k, axis=0))
     for sign, nb in ((1, left), (-1, right)):
         f = nb[idx]
         has = f >= 0
         kf = np.where(has, table[seg[np.maximum(f, 0)]], -1)
         ok = has & (kf == k - sign) & (kf >= 0)
         step = np.zeros(len(idx))
-        step[ok] = z[ok] - depth_on(rays[f[ok]], planes[kf[ok]])
+        step[ok] = z[ok] - depth_on(rays.take(f[ok], axis=0), planes.take(kf[ok], axis=0))
         ok &= np.abs(step) < 2 * tol_mm
         cnt = np.bincount(seg[idx[ok]], minlength=len(table))
         tot = np.bincount(seg[idx[ok]], weights=step[ok], minlength=len(table))
         out[sign] = np.where(cnt >= min_rows, tot / np.maximum(cnt, 1), np.nan)
+        if since is not None:
+            out[sign] = np.where(since[1], out[sign], since[0][sign])
+    return out
+
+
+def _touching(seg: np.ndarray, left: np.ndarray, right: np.ndarray, flags: np.ndarray) -> np.ndarray:
+    """(S,) the segments flagged in ``flags`` (S,) and those with a centre beside one of theirs in its row."""
+    out = flags.copy()
+    members = np.flatnonzero(flags[seg])
+    for nb in (left[members], right[members]):
+        out[seg[nb[nb >= 0]]] = True
     return out
 
 
@@ -489,8 +512,8 @@ def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
     idx = np.nonzero(have)[0]
     if len(idx) < 10:
         return 15.0
-    a = intersect(rays[idx], planes[lab[idx]])
-    b = intersect(rays[left[idx]], planes[lab[left[idx]]])
+    a = intersect(rays.take(idx, axis=0), planes.take(lab[idx], axis=0))
+    b = intersect(rays.take(left[idx], axis=0), planes.take(lab[left[idx]], axis=0))
     return float(np.median(np.linalg.norm(a - b, axis=1)))
 
 
@@ -519,11 +542,21 @@ def _neighbour_pairs(seg, mask, left, right) -> _Pairs:
 
 def _open_pairs(pairs: _Pairs, table: np.ndarray) -> _Pairs:
     """The ``pairs`` whose own segment has no label in ``table`` (S,) yet: only those can vote in growth."""
-    out = []
-    for idx, nbr, sign, own_seg, nb_seg, far, far_seg in pairs:
-        keep = table[own_seg] < 0
-        out.append((idx[keep], nbr[keep], sign, own_seg[keep], nb_seg[keep], far[keep], far_seg[keep]))
+    return _subset(pairs, [table[own_seg] < 0 for _, _, _, own_seg, _, _, _ in pairs])
+
+
+def _beside(pairs: _Pairs, flags: np.ndarray) -> np.ndarray:
+    """(S,) the own segments of the ``pairs`` whose neighbour's segment is flagged in ``flags`` (S,)."""
+    out = np.zeros(len(flags), bool)
+    for _, _, _, own_seg, nb_seg, _, _ in pairs:
+        out[own_seg[flags[nb_seg]]] = True
     return out
+
+
+def _subset(pairs: _Pairs, keep: list[np.ndarray]) -> _Pairs:
+    """Per side, the ``pairs`` flagged in that side's ``keep`` (K,)."""
+    return [(idx[k], nbr[k], sign, own_seg[k], nb_seg[k], far[k], far_seg[k])
+            for (idx, nbr, sign, own_seg, nb_seg, far, far_seg), k in zip(pairs, keep, strict=True)]
 
 
 def _label_table(seg: np.ndarray, seg_label: dict[int, int]) -> np.ndarray:
@@ -552,7 +585,7 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
         if len(idx) == 0:
             continue
         if depth_only:
-            zn = depth_on(rays[nbr], planes[kn])
+            zn = depth_on(rays.take(nbr, axis=0), planes.take(kn, axis=0))
             if slope:
                 # a steep surface (a tail hanging toward its tip) changes depth by a similar step from stripe
                 # to stripe: extrapolate the neighbour's own step where its outer neighbour is the next stripe
@@ -560,7 +593,7 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
                 has = (kf == kn - sign) & (kf >= 0)
                 step = np.zeros(len(idx))
                 if has.any():
-                    zf = depth_on(rays[far[has]], planes[kf[has]])
+                    zf = depth_on(rays.take(far[has], axis=0), planes.take(kf[has], axis=0))
                     # only where the stripes are evenly spaced in the image too (no stripes missing between)
                     near_dx = np.abs(rays[idx[has], 0] - rays[nbr[has], 0])
                     far_dx = np.abs(rays[nbr[has], 0] - rays[far[has], 0])
@@ -579,15 +612,15 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
                     rest = ~has & (step == 0.0) & np.isfinite(own_step)
                     step[rest] = own_step[rest]
         else:
-            pn = intersect(rays[nbr], planes[kn])
+            pn = intersect(rays.take(nbr, axis=0), planes.take(kn, axis=0))
         # the voters' points on the planes of every gap at once (row by row as one gap at a time)
         ks = [kn + sign * gap for gap in gaps]
-        on_k = np.concatenate([np.clip(k, 0, n - 1) for k in ks])
-        voter_rays = np.tile(rays[idx], (len(gaps), 1))
+        on_k = np.clip(np.concatenate(ks), 0, n - 1)
+        voter_rays = np.tile(rays.take(idx, axis=0), (len(gaps), 1))
         if depth_only:
-            z_gap = depth_on(voter_rays, planes[on_k]).reshape(len(gaps), -1)
+            z_gap = depth_on(voter_rays, planes.take(on_k, axis=0)).reshape(len(gaps), -1)
         else:
-            p_gap = intersect(voter_rays, planes[on_k]).reshape(len(gaps), -1, 3)
+            p_gap = intersect(voter_rays, planes.take(on_k, axis=0)).reshape(len(gaps), -1, 3)
         best_k = np.full(len(idx), -1)
         best_d = np.full(len(idx), np.inf)
         for g, gap in enumerate(gaps):
@@ -630,10 +663,10 @@ def _majority(voter: np.ndarray, vote: np.ndarray, n: int, min_share: float) -> 
     return dict(zip(segs[best].tolist(), labs[best].tolist(), strict=True))
 
 
-def _refine(c, rays, planes, seg, seg_label, mask, left, right, tol_mm, n, rounds: int = 3) -> None:
-    """Re-vote each labelled segment in ``mask`` by its neighbours; a clear majority for another label
-    (a growth step that took the wrong gap) replaces it. Updates ``seg_label`` in place."""
-    pairs = _neighbour_pairs(seg, mask, left, right)
+def _refine(rays, planes, seg, seg_label, pairs: _Pairs, tol_mm, n, rounds: int = 3) -> None:
+    """Re-vote each labelled segment by its neighbours (``pairs``: the ``_neighbour_pairs`` of its
+    centres); a clear majority for another label (a growth step that took the wrong gap) replaces it.
+    Updates ``seg_label`` in place."""
     table = _label_table(seg, seg_label)
     for _ in range(rounds):
         votes = _votes(rays, planes, table, pairs, tol_mm, n, True, True, 0.7, (1, 2, 3))

@@ -43,8 +43,14 @@ def projector_elevation(points: np.ndarray, planes: np.ndarray) -> np.ndarray:
 def _elevation(points: np.ndarray, centre: np.ndarray, a: np.ndarray) -> np.ndarray:
     q = points - centre
     along = q @ a
-    across = np.linalg.norm(q - along[:, None] * a, axis=1)
-    return along / np.maximum(across, 1e-9)
+    # the distance from the axis summed column by column: the rounding of np.linalg.norm(axis=1) over
+    # three columns, without its (K, 3) temporaries
+    d = q[:, 0] - along * a[0]
+    across2 = d * d
+    for j in (1, 2):
+        d = q[:, j] - along * a[j]
+        across2 += d * d
+    return along / np.maximum(np.sqrt(across2), 1e-9)
 
 
 def in_sorted(x: np.ndarray, sorted_values: np.ndarray) -> np.ndarray:
@@ -106,7 +112,7 @@ def behind_background(rays, planes, r, idx, n, background: np.ndarray, off: int,
     inside = (k >= 0) & (k < n)
     if not inside.any():
         return 0.0
-    p = intersect(rays[sub[inside]], planes[k[inside]])
+    p = intersect(rays.take(sub[inside], axis=0), planes.take(k[inside], axis=0))
     camera_side = np.where(background[:, 3] <= 0, 1.0, -1.0)  # the sign of n.x - d at the camera (x = 0)
     depth = (p @ background[:, :3].T - background[:, 3]) * camera_side  # (K, P), > 0 on the camera's side
     return float((depth < -margin_mm).any(axis=1).mean())
@@ -117,7 +123,7 @@ def lit_cells(rays, planes, labels, which, bins: float = 0.002) -> np.ndarray:
     (indices) with stripe ``labels[which]``."""
     if len(which) == 0:
         return np.zeros(0, np.int64)
-    p = intersect(rays[which], planes[labels[which]])
+    p = intersect(rays.take(which, axis=0), planes.take(labels[which], axis=0))
     e = np.floor(projector_elevation(p, planes) / bins).astype(np.int64)
     return np.unique(labels[which] * 1_000_000 + e)
 
@@ -145,7 +151,7 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
     weighed = inside.mean(axis=1) >= 0.8
     at, i = np.nonzero(inside & weighed[:, None])
     # every offset's points at once (row by row the numbers of one offset at a time)
-    p = intersect(rays[sub[i]], planes[k[at, i]])
+    p = intersect(rays.take(sub[i], axis=0), planes.take(k[at, i], axis=0))
     _, axis = pencil_axis(planes)
     e = np.floor(_elevation(p, projector_centre(planes), axis) / bins).astype(np.int64)
     cells, hits = _distinct_cells(at, k[at, i], e, len(offs), n, deep)

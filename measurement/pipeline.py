@@ -84,7 +84,7 @@ def scan(image: np.ndarray, calibration: Calibration, view: str = "side", ambien
         raise ScanError(f"no stripe could be matched to the calibration's {calibration.stripes} light planes "
                         f"(rows show about {n_found} stripes): {hint}")
     rays_s = rays_at(smooth_u[ok], centres.v[ok], ray_table(calibration.intrinsics))
-    pts = intersect(rays_s, calibration.planes[labels.stripe[ok]])
+    pts = intersect(rays_s, calibration.planes.take(labels.stripe[ok], axis=0))
     uv = np.column_stack([smooth_u[ok], centres.v[ok]])
     stripe = labels.stripe[ok]
     t["triangulate"] = time.perf_counter()
