@@ -171,8 +171,10 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     # 4: foreground clusters: relative labels by growing from a seed, offset from the shadow they cast
     weighed = np.zeros(m, bool)
     bg_labels = dict(seg_label)
+    bg_cl = _labels_of(seg, seg_label, long_seg)
+    bg_lit = lit_cells(rays, planes, bg_cl, np.flatnonzero(bg_cl >= 0))
     fg_labels, small, cl, lit, first = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol,
-                                                   n, z_all, weighed, params.depth_range_mm, bg_planes)
+                                                   n, z_all, weighed, params.depth_range_mm, bg_planes, bg_lit)
     if fg_labels:
         # pieces of the animal without shadow evidence of their own continue a labelled piece's surface
         is_bg = np.zeros(seg.max() + 1, bool)
@@ -190,8 +192,8 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
         seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit))
     if fg_labels and first is not None:  # the whole animal weighed again, with what joined after the first piece
         fg = {s: k for s, k in seg_label.items() if s not in bg_labels}
-        shift = _whole_animal_shift(c, rays, planes, seg, bg_labels, fg, fg_mask, long_seg, left, right, tol, n,
-                                    bg_planes, first)
+        shift = _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg, fg_mask, long_seg, left, right, tol,
+                                    n, bg_planes, first)
         if shift:
             seg_label = {**bg_labels, **{s: k + shift for s, k in fg.items() if 0 <= k + shift < n}}
     labels = _labels_of(seg, seg_label, long_seg)
@@ -204,9 +206,10 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
 
 
 def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, weighed, zrange,
-                bg_planes=None) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None]:
+                bg_planes, bg_lit) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None]:
     """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
-    (M,) the centres of every piece that was weighed for an offset. Also returns the per-centre labels
+    (M,) the centres of every piece that was weighed for an offset. ``bg_lit`` : the projector cells lit at
+    the labels of ``seg_label`` (``lit_cells``). Also returns the per-centre labels
     (M,) of the background and the placed pieces, the projector cells they light (``lit_cells``) and the
     centres (K,) of the first piece placed (None if none was).
 
@@ -221,7 +224,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)  # centres left per segment
     pool = _neighbour_pairs(seg, remaining, left, right)  # of the centres left
     cl = _labels_of(seg, seg_label, long_seg)
-    lit = lit_cells(rays, planes, cl, np.nonzero(cl >= 0)[0])
+    lit = bg_lit
     mid = n // 2
     biggest = 0
     placed_max = 0  # centres in the largest piece placed so far
@@ -266,10 +269,11 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     return out, small, cl, lit, first
 
 
-def _whole_animal_shift(c, rays, planes, seg, bg_labels, fg_labels, fg_mask, long_seg, left, right, tol, n,
+def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask, long_seg, left, right, tol, n,
                         bg_planes, first, max_behind: float = 0.001) -> int:
     """Stripes (0 or a shift away from the conflicts) by which to move every animal label in ``fg_labels``
-    (segment -> label), from the conflict curve of all of them together against the background's cells.
+    (segment -> label), from the conflict curve of all of them together against the background's labels
+    ``bg_cl`` (M,) and the cells they light ``bg_lit``.
 
     The first piece's offset was read from its own outline; an extremity on the lit side that joined only
     later (a tail seen from above, linked again only after growth, continuation or a small piece) leaves
@@ -286,8 +290,7 @@ def _whole_animal_shift(c, rays, planes, seg, bg_labels, fg_labels, fg_mask, lon
     if len(idx) < 50:
         return 0
     right_side = projector_right(planes)
-    shift = occlusion_offset(rays, planes, _labels_of(seg, bg_labels, long_seg), np.maximum(r, 0), idx, n,
-                             right_side)
+    shift = occlusion_offset(rays, planes, bg_cl, np.maximum(r, 0), idx, n, right_side, lit=bg_lit)
     if not shift or (shift > 0) != right_side:
         return 0
     if bg_planes is not None and behind_background(rays, planes, np.maximum(r, 0), first, n, bg_planes,
