@@ -37,13 +37,15 @@ def cached_capture(out: Path, post=None, **render) -> Path:
 @dataclass
 class ViewLabels:
     """Scores of one view: share of the animal's crossings labelled, share of those right, background
-    labels right, labelling time, and per piece of the animal (centres, chosen offset, true offset)."""
+    labels right, labelling time, per piece of the animal (centres, chosen offset, true offset), and the
+    shift the whole-animal recheck gave every animal label afterwards (0: none)."""
 
     labelled: float
     right: float
     background_right: float
     ms: float
     pieces: list[tuple[int, int | None, int]]
+    shift: int = 0
 
 
 def label_view(cap: Path, view: str) -> ViewLabels:
@@ -61,18 +63,24 @@ def label_view(cap: Path, view: str) -> ViewLabels:
     animal, bg = kind == ANIMAL, (kind == 2) | (kind == 3)
     got, bgot = animal & (lab >= 0), bg & (lab >= 0)
     pieces = []
+    shift = 0
     for idx, rel, off in trace:
+        if idx is None:
+            shift = off
+            continue
         ok = animal[idx] & (truth[idx] >= 0)
         if ok.sum() >= 20:
             vals, cnt = np.unique(truth[idx][ok] - rel[ok], return_counts=True)
             pieces.append((len(idx), off, int(vals[np.argmax(cnt)])))
     return ViewLabels(float(got.sum() / max(animal.sum(), 1)),
                       float(np.mean(lab[got] == truth[got])) if got.any() else float("nan"),
-                      float(np.mean(lab[bgot] == truth[bgot])) if bgot.any() else float("nan"), ms, pieces)
+                      float(np.mean(lab[bgot] == truth[bgot])) if bgot.any() else float("nan"), ms, pieces,
+                      shift)
 
 
-def pieces_text(pieces: list[tuple[int, int | None, int]]) -> str:
-    return "; ".join(f"{n}: {off} / {true}" for n, off, true in pieces)
+def pieces_text(pieces: list[tuple[int, int | None, int]], shift: int = 0) -> str:
+    text = "; ".join(f"{n}: {off} / {true}" for n, off, true in pieces)
+    return f"{text}; then all {shift:+d}" if shift else text
 
 
 def print_pieces(name: str, cap: Path) -> list[float]:
@@ -81,7 +89,7 @@ def print_pieces(name: str, cap: Path) -> list[float]:
     for view in VIEWS:
         v = label_view(cap, view)
         rights.append(v.right)
-        print(f"{name:25s} {view:4s}  {v.labelled:8.1%}  {v.right:7.2%}   {pieces_text(v.pieces)}", flush=True)
+        print(f"{name:25s} {view:4s}  {v.labelled:8.1%}  {v.right:7.2%}   {pieces_text(v.pieces, v.shift)}", flush=True)
     return rights
 
 

@@ -35,6 +35,8 @@ VARIANTS: dict[str, dict] = {
     "thin stripes (0.5x sigma)": {"sigma": 0.00045},
     "sparse fan (1.5x spacing)": {"fan": 1.5},
     "dense fan (0.7x spacing)": {"fan": 0.7},
+    "noisy sensor (2x read, 5x shot)": {"light": {"read_noise": 3.0, "gain": 1.25}},
+    "noisy sensor (3x read, 5x shot)": {"light": {"read_noise": 4.5, "gain": 1.25}},
     "noisy sensor (4x read, 6x shot)": {"light": {"read_noise": 6.0, "gain": 1.5}},
     "bright room (2.5x ambient)": {"light": {"ambient": 150.0}},
     "soft focus (2.5x camera blur)": {"light": {"blur_px": 2.0}},
@@ -47,7 +49,7 @@ VARIANTS: dict[str, dict] = {
 
 
 def capture_for(cache: Path, name: str, variant: dict, size: tuple[int, int], seed: int) -> Path:
-    slug = "".join(ch if ch.isalnum() else "-" for ch in name.split(" (")[0])
+    slug = "-".join("".join(ch if ch.isalnum() else " " for ch in name).split())
     rig = default_rig(size, 40)
     p = rig.projector
     if "sigma" in variant:
@@ -91,7 +93,7 @@ def main() -> None:
                 acc = f"scan refused: {err}"
             good += s.right >= 0.95
             print(f"{name:32s} {view:4s}  {s.right:8.2%} / {s.background_right:7.2%}   {acc}   "
-                  f"{pieces_text(s.pieces)}", flush=True)
+                  f"{pieces_text(s.pieces, s.shift)}", flush=True)
     print(f"views with at least 95 % of the animal's labelled crossings right: {good} of {total}")
 
 

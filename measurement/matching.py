@@ -196,6 +196,8 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
                                     n, bg_planes, first)
         if shift:
             seg_label = {**bg_labels, **{s: k + shift for s, k in fg.items() if 0 <= k + shift < n}}
+            if _TRACE is not None:  # (no centres, no relative labels, the shift of every animal label)
+                _TRACE.append((None, None, shift))
     labels = _labels_of(seg, seg_label, long_seg)
     ok = labels >= 0
     zmin, zmax = params.depth_range_mm
