@@ -209,9 +209,10 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
     step = float(steps.mean()) if len(steps) else 0.0
     if step <= 0.005:  # no ramp: nothing bounds the piece on the lit side
         return None
+    # the first tolerated offset coming up the ramp: with a noisy sensor the flat side is bumpy, and a
+    # bump over the tolerance between the ramp's foot and the minimum must not hold the reading there
     tolerated = vals - floor < residue * step
-    while i > 0 and tolerated[i - 1]:
-        i -= 1
+    i = int(np.argmax(tolerated))
     if i == 0:
         return None
     best = offs[i]

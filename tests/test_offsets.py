@@ -135,3 +135,18 @@ def test_a_plate_pushed_deeper_sinks_behind_the_wall():
     share = {o: behind_background(rays, planes, r, idx, N, wall, o) for o in range(k_min - 6, k_min + 8)}
     assert all(share[o] == 0.0 for o in share if o <= k_min)
     assert share[k_min + 5] == 1.0
+
+
+def test_a_bump_on_the_flat_side_does_not_hold_the_reading_away_from_the_ramp():
+    """A noisy sensor's curve (a side view with 3x the read noise): the ramp ends at 27, and a bump at 29
+    over the tolerance lies between it and the minimum at 32. The first tolerated offset coming up the
+    ramp is the answer (reading down from the minimum stopped at 30, three stripes deep)."""
+    from measurement.offsets import choose_offset
+
+    vals = [0.113, 0.114, 0.101, 0.089, 0.083, 0.083, 0.079, 0.07, 0.066, 0.064, 0.043, 0.028, 0.009, 0.005,
+            0.013, 0.01, 0.01, 0.002, 0.043, 0.079, 0.108, 0.127, 0.139, 0.154, 0.168, 0.17]
+    conflicts = {15 + i: v for i, v in enumerate(vals)}
+    beyond = {o: (0.0, 0.0) for o in conflicts}
+    assert choose_offset(conflicts, beyond, projector_right=True) == 27
+    mirrored = {40 - o: v for o, v in conflicts.items()}
+    assert choose_offset(mirrored, {o: (0.0, 0.0) for o in mirrored}, projector_right=False) == 13
