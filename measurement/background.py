@@ -10,16 +10,17 @@ from .triangulation import depth_for_labels, intersect
 
 
 def background_planes(rays: np.ndarray, planes: np.ndarray, labels: np.ndarray, tol_mm: float = 8.0,
-                       max_planes: int = 2) -> np.ndarray | None:
-    """The dominant planes (floor, wall) of the labelled cloud, (P, 4); None when no plane carries a fifth
-    of it (no planar background to separate from)."""
+                       max_planes: int = 2, first_share: float = 0.2, next_share: float = 0.1) -> np.ndarray | None:
+    """The dominant planes (floor, wall) of the labelled cloud, (P, 4); None when no plane carries
+    ``first_share`` of it (no planar background to separate from). A further plane needs ``next_share``:
+    with a noisy sensor the floor's rows are labelled far less often than the wall's."""
     from .planes import fit_plane_robust
 
     idx = np.nonzero(labels >= 0)[0]
     if len(idx) < 200:
         return None
     pts = intersect(rays.take(idx, axis=0), planes.take(labels[idx], axis=0))
-    found = []
+    found: list[np.ndarray] = []
     rest = np.ones(len(idx), bool)
     rng = np.random.default_rng(0)
     for _ in range(max_planes):
@@ -28,7 +29,7 @@ def background_planes(rays: np.ndarray, planes: np.ndarray, labels: np.ndarray, 
             break
         plane, _ = fit_plane_robust(pts[cand], rng, iterations=300, inlier_mm=tol_mm / 2, exact=False)
         near = np.abs(pts @ plane[:3] - plane[3]) < tol_mm
-        if near[rest].sum() < 0.2 * len(idx):
+        if near[rest].sum() < (next_share if found else first_share) * len(idx):
             break
         found.append(plane)
         rest &= ~near

@@ -78,7 +78,10 @@ class MatchingParams:
 
 
 def main_row_labels(c: Centres, n: int) -> np.ndarray:
-    """Labels (M,) from rows holding exactly n evenly spread centres, -1 elsewhere."""
+    """Labels (M,) from rows that show all n stripes, -1 elsewhere: rows holding exactly n evenly spread
+    centres, and rows missing up to n // 8 of them where each missing stripe leaves one gap of twice the
+    local spacing (a noisy sensor loses the dim stripes of a floor seen at a grazing angle, and then no
+    floor row holds all n)."""
     labels = np.full(len(c), -1, np.int64)
     counts = np.bincount(c.v, minlength=int(c.v.max(initial=0)) + 1)
     full = counts[c.v] == n
@@ -93,7 +96,34 @@ def main_row_labels(c: Centres, n: int) -> np.ndarray:
     regular = ((ratio > 0.6) & (ratio < 1.67)).all(axis=1) & (gaps > 2).all(axis=1)
     rows_ok = np.repeat(regular, n)
     labels[order[rows_ok]] = np.tile(np.arange(n), regular.sum())
+    for m in range(n - n // 8, n):
+        _gapped_rows(c, counts, m, n, labels)
     return labels
+
+
+def _gapped_rows(c: Centres, counts: np.ndarray, m: int, n: int, labels: np.ndarray, window: int = 7,
+                 slack: float = 0.2) -> None:
+    """Write into ``labels`` (M,) the labels of the rows holding m < n centres whose gaps are each one
+    or two local spacings (the median gap of the ``window`` around it), within ``slack``, adding up to
+    n - 1 spacings, and whose spacing per stripe changes smoothly along the row."""
+    idx = np.nonzero(counts[c.v] == m)[0]
+    if len(idx) == 0 or m < window + 1:
+        return
+    order = idx[row_order(c.take(idx))]
+    gaps = np.diff(c.u[order].reshape(-1, m), axis=1)  # (R, m - 1) pixels
+    pad = window // 2
+    windows = np.lib.stride_tricks.sliding_window_view(np.pad(gaps, ((0, 0), (pad, pad)), mode="edge"), window,
+                                                      axis=1)
+    r = gaps / np.maximum(np.median(windows, axis=2), 1e-6)
+    k = np.rint(r)
+    per_stripe = gaps / np.maximum(k, 1)
+    ratio = per_stripe[:, 1:] / np.maximum(per_stripe[:, :-1], 1e-6)
+    ok = (((k >= 1) & (k <= 2) & (np.abs(r - k) < slack)).all(axis=1) & (k.sum(axis=1) == n - 1)
+          & (gaps > 2).all(axis=1) & ((ratio > 0.7) & (ratio < 1.43)).all(axis=1))
+    if ok.any():
+        steps = k[ok].astype(np.int64)
+        lab = np.concatenate([np.zeros((len(steps), 1), np.int64), np.cumsum(steps, axis=1)], axis=1)
+        labels[order.reshape(-1, m)[ok].ravel()] = lab.ravel()
 
 
 def _segment_vote(seg: np.ndarray, labels: np.ndarray, min_share: float = 0.8) -> dict[int, int]:

@@ -181,3 +181,47 @@ def test_a_top_view_in_a_bright_room_is_weighed_again_as_a_whole(tmp_path):
     got = (kind == 5) & (lab >= 0)
     assert got.sum() > 0.8 * (kind == 5).sum()
     assert np.mean(lab[got] == truth[got]) > 0.99
+
+
+def test_rows_missing_a_few_stripes_still_give_the_background_its_labels():
+    """A noisy sensor loses dim floor stripes, so no floor row holds all n: a row whose gaps are one or
+    two local spacings, adding up to n - 1, is labelled; one missing its first stripe (the count of
+    spacings falls short) or with a gap that fits neither is not."""
+    from measurement.detection import Centres
+    from measurement.matching import main_row_labels
+
+    n = 40
+    u_all = 100.0 + 25.0 * np.arange(n) + 0.05 * np.arange(n) ** 2  # perspective: spacing grows along the row
+    rows = {
+        0: np.arange(n),  # complete
+        1: np.delete(np.arange(n), [7, 23]),  # two interior stripes missing
+        2: np.delete(np.arange(n), [0, 12]),  # the first one missing: no way to tell which stripe leads
+        3: np.delete(np.arange(n), [9, 10]),  # two neighbours missing: a gap of three spacings
+    }
+    u = np.concatenate([u_all[k] for k in rows.values()])
+    v = np.concatenate([np.full(len(k), r, np.int32) for r, k in rows.items()])
+    truth = np.concatenate(list(rows.values()))
+    c = Centres(u, v, np.full(len(u), 40.0, np.float32), np.full(len(u), 6.0, np.float32))
+    lab = main_row_labels(c, n)
+    assert (lab[v == 0] == truth[v == 0]).all()
+    assert (lab[v == 1] == truth[v == 1]).all()
+    assert (lab[v == 2] == -1).all()
+    assert (lab[v == 3] == -1).all()
+
+
+def test_a_floor_with_a_tenth_of_the_labels_is_a_background_plane_too():
+    """The wall carries most labelled points under noise; the floor's tenth-plus still makes a plane."""
+    from measurement.background import background_planes
+
+    rng = np.random.default_rng(0)
+    wall = np.column_stack([rng.uniform(-500, 500, 1700), rng.uniform(-400, 100, 1700), np.full(1700, 1600.0)])
+    x, z = rng.uniform(-500, 500, 300), rng.uniform(900, 1600, 300)
+    floor = np.column_stack([x, np.full(300, 300.0), z])
+    pts = np.vstack([wall, floor])
+    rays = pts / pts[:, 2:3]
+    # one light plane (x = const) through each point, so each point is its own label's intersection
+    planes = np.column_stack([np.ones(len(pts)), np.zeros(len(pts)), np.zeros(len(pts)), pts[:, 0]])
+    found = background_planes(rays, planes, np.arange(len(pts)))
+    assert found is not None and len(found) == 2
+    normals = np.abs(found[:, :3])
+    assert normals[:, 2].max() > 0.99 and normals[:, 1].max() > 0.99  # the wall and the floor
