@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from functools import lru_cache
 
 import numpy as np
 
@@ -22,22 +23,34 @@ def projector_centre(planes: np.ndarray) -> np.ndarray:
     """A point on the axis that all light planes share, at the camera's height (y = 0): the projector
     centre of a level rig. The planes alone cannot fix it along the axis; a few centimetres off only
     tilts rays by the ratio of that error to the working distance."""
-
-    p0, a = pencil_axis(planes)
-    return p0 - a * (p0[1] / a[1]) if abs(a[1]) > 1e-6 else p0
+    return _projector_frame(planes)[0].copy()
 
 
 def projector_right(planes: np.ndarray) -> bool:
     """Whether the projector sits right of the camera (positive x), from the planes' shared axis."""
-    return bool(projector_centre(planes)[0] > 0)
+    return bool(_projector_frame(planes)[0][0] > 0)
 
 
 def projector_elevation(points: np.ndarray, planes: np.ndarray) -> np.ndarray:
     """Elevation of each point (M, 3) as seen from the projector along its stripe: tan of the angle
     between the ray and the plane perpendicular to the shared axis (the projector's row coordinate)."""
+    return _elevation(points, *_projector_frame(planes))
 
-    _, a = pencil_axis(planes)
-    return _elevation(points, projector_centre(planes), a)
+
+def _projector_frame(planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The projector centre (3,) mm and the planes' shared axis (3,) (read-only), computed once per
+    set of light planes (N, 4): a scan asks for them dozens of times."""
+    planes = np.ascontiguousarray(planes)
+    return _frame_of(planes.tobytes(), planes.dtype.str, planes.shape)
+
+
+@lru_cache(maxsize=8)
+def _frame_of(data: bytes, dtype: str, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    p0, a = pencil_axis(np.frombuffer(data, dtype).reshape(shape))
+    centre = p0 - a * (p0[1] / a[1]) if abs(a[1]) > 1e-6 else p0
+    centre.flags.writeable = False
+    a.flags.writeable = False
+    return centre, a
 
 
 def _elevation(points: np.ndarray, centre: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -152,8 +165,7 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
     at, i = np.nonzero(inside & weighed[:, None])
     # every offset's points at once (row by row the numbers of one offset at a time)
     p = intersect(rays.take(sub[i], axis=0), planes.take(k[at, i], axis=0))
-    _, axis = pencil_axis(planes)
-    e = np.floor(_elevation(p, projector_centre(planes), axis) / bins).astype(np.int64)
+    e = np.floor(projector_elevation(p, planes) / bins).astype(np.int64)
     cells, hits = _distinct_cells(at, k[at, i], e, len(offs), n, deep)
     conflicts = {int(o): float(hits[j] / cells[j]) for j, o in enumerate(offs) if weighed[j]}
     if not conflicts:
