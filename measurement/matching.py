@@ -20,7 +20,6 @@ Here (status and figures: docs/benchmarks.md; the animal's offset is not yet rel
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
@@ -435,8 +434,8 @@ def _labels_of(seg: np.ndarray, seg_label: dict[int, int], long_seg: np.ndarray)
 
 def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, bg_planes=None,
               depth_only=False, avoid_planes=None, gaps=(1, 2, 3), min_share=0.6, slope=False,
-              pairs: _Pairs | None = None) -> np.ndarray:
-    """Grow labels along continuous surfaces until nothing changes; returns per-centre labels.
+              pairs: _Pairs | None = None) -> None:
+    """Grow labels along continuous surfaces until nothing changes (updates ``seg_label`` in place).
     With ``bg_planes`` a segment only joins when its points then lie on those planes; with
     ``avoid_planes`` only when they do not. With ``slope`` (depth only) the neighbour's depth is
     extrapolated by its own step from the stripe beyond it, so a steep surface keeps growing.
@@ -469,7 +468,6 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
         newly[grown] = True
         if steps is not None:
             since = (steps, _touching(seg, left, right, newly))
-    return _labels_of(seg, seg_label, long_seg)
 
 
 def _segment_steps(seg, rays, planes, table, left, right, tol_mm,
@@ -523,20 +521,33 @@ def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
     return float(np.median(np.linalg.norm(a - b, axis=1)))
 
 
-class _Pairs(NamedTuple):
-    """Row-neighbour pairs across segments, the left side's first, then the right side's (K,) each."""
+class _Pairs:
+    """Row-neighbour pairs across segments, the left side's first, then the right side's: rows (7, K) of
+    the centre, its row neighbour on that side (in another segment), the sign of the label step toward
+    the centre (1 from the left, -1 from the right), the segments of both, and the neighbour's own
+    neighbour further out with its segment (-1 where none). Unpacks into those seven rows."""
 
-    idx: np.ndarray  # the centre
-    nbr: np.ndarray  # its row neighbour on that side, in another segment
-    sign: np.ndarray  # the sign of the label step toward the centre (1 from the left, -1 from the right)
-    own_seg: np.ndarray  # the centre's segment
-    nb_seg: np.ndarray  # the neighbour's segment
-    far: np.ndarray  # the neighbour's own neighbour further out (-1 where none)
-    far_seg: np.ndarray  # its segment (-1 where none)
+    def __init__(self, cols: np.ndarray) -> None:
+        self.cols = cols
+
+    def __iter__(self):
+        return iter(self.cols)
+
+    @property
+    def idx(self) -> np.ndarray:
+        return self.cols[0]
+
+    @property
+    def own_seg(self) -> np.ndarray:
+        return self.cols[3]
+
+    @property
+    def nb_seg(self) -> np.ndarray:
+        return self.cols[4]
 
     def take(self, at: np.ndarray) -> _Pairs:
         """The pairs at positions (or flagged in the mask) ``at``, in their order."""
-        return _Pairs(*(a[at] for a in self))
+        return _Pairs(self.cols.take(np.flatnonzero(at) if at.dtype == bool else at, axis=1))
 
 
 def _neighbour_pairs(seg, mask, left, right) -> _Pairs:
@@ -554,7 +565,7 @@ def _neighbour_pairs(seg, mask, left, right) -> _Pairs:
         far = nb[nbr]
         far_seg = np.where(far >= 0, seg[np.maximum(far, 0)], -1)
         parts.append((idx, nbr, np.full(len(idx), sign, np.int64), own, other, far, far_seg))
-    return _Pairs(*(np.concatenate(cols) for cols in zip(*parts, strict=True)))
+    return _Pairs(np.concatenate([np.stack(part) for part in parts], axis=1))
 
 
 def _open_pairs(pairs: _Pairs, table: np.ndarray) -> _Pairs:
@@ -583,7 +594,7 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
     """One round of voting on label ``table`` (S,) by neighbour ``pairs``: segment -> label for the
     segments (unlabelled ones, or with ``relabel`` labelled ones) whose row neighbours agree on a label
     that continues their surface, for the segments flagged in ``active`` (S,) (all when None)."""
-    at = np.flatnonzero(active[pairs.own_seg]) if active is not None else np.arange(len(pairs.idx))
+    at = np.flatnonzero(active[pairs.own_seg]) if active is not None else np.arange(pairs.cols.shape[1])
     own, kn = table[pairs.own_seg[at]], table[pairs.nb_seg[at]]
     take = ((own >= 0) if relabel else (own < 0)) & (kn >= 0)
     idx, nbr, sign, voter, nb_seg, far, far_seg = pairs.take(at[take])

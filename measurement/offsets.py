@@ -156,17 +156,21 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
     rr = r[idx]
     sub = _thinned(idx)
     offs = np.arange(-int(rr.max()), n - int(rr.min()))
-    k = r[sub][None, :] + offs[:, None]  # (O, S) the stripe of each centre at each offset
-    inside = (k >= 0) & (k < n)
-    # share of the piece that an offset pushes past the first (< 0) or last (>= n) stripe
-    before, past = (k < 0).mean(axis=1), (k >= n).mean(axis=1)
+    # share of the piece that an offset pushes before the first (< 0) or past the last (>= n) stripe
+    rs = np.sort(r[sub])
+    lo, hi = np.searchsorted(rs, -offs), len(rs) - np.searchsorted(rs, n - offs)
+    before, past = lo / len(rs), hi / len(rs)
     beyond = {int(o): (float(b), float(a)) for o, b, a in zip(offs, before, past, strict=True)}
-    weighed = inside.mean(axis=1) >= 0.8
-    at, i = np.nonzero(inside & weighed[:, None])
+    weighed = (len(rs) - lo - hi) / len(rs) >= 0.8
+    rows = np.flatnonzero(weighed)
+    k = r[sub][None, :] + offs[rows, None]  # (W, S) the stripe of each centre at each weighed offset
+    flat = np.flatnonzero((k >= 0) & (k < n))
+    at, i = np.divmod(flat, len(sub))
+    k = k.ravel().take(flat)
     # every offset's points at once (row by row the numbers of one offset at a time)
-    p = intersect(rays.take(sub[i], axis=0), planes.take(k[at, i], axis=0))
+    p = intersect(rays.take(sub, axis=0).take(i, axis=0), planes.take(k, axis=0))
     e = np.floor(projector_elevation(p, planes) / bins).astype(np.int64)
-    cells, hits = _distinct_cells(at, k[at, i], e, len(offs), n, deep)
+    cells, hits = _distinct_cells(rows[at], k, e, len(offs), n, deep)
     conflicts = {int(o): float(hits[j] / cells[j]) for j, o in enumerate(offs) if weighed[j]}
     if not conflicts:
         return None
