@@ -34,7 +34,8 @@ def projector_right(planes: np.ndarray) -> bool:
 def projector_elevation(points: np.ndarray, planes: np.ndarray) -> np.ndarray:
     """Elevation of each point (M, 3) as seen from the projector along its stripe: tan of the angle
     between the ray and the plane perpendicular to the shared axis (the projector's row coordinate)."""
-    return _elevation(points, *_projector_frame(planes))
+    centre, a = _projector_frame(planes)
+    return _elevation(points - centre, a)
 
 
 def _projector_frame(planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -53,17 +54,31 @@ def _frame_of(data: bytes, dtype: str, shape: tuple[int, ...]) -> tuple[np.ndarr
     return centre, a
 
 
-def _elevation(points: np.ndarray, centre: np.ndarray, a: np.ndarray) -> np.ndarray:
-    q = points - centre
+def elevation_bins(points: np.ndarray, planes: np.ndarray, bins: float) -> np.ndarray:
+    """``floor(projector_elevation(points, planes) / bins)`` (K,) int64 for points (K, 3) mm, which are
+    used as scratch (overwritten)."""
+    points -= _projector_frame(planes)[0]
+    e = _elevation(points, _projector_frame(planes)[1])
+    np.divide(e, bins, out=e)
+    return np.floor(e, out=e).astype(np.int64)
+
+
+def _elevation(q: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Elevation (K,) of points q (K, 3) relative to the projector centre about the unit axis a (3,)."""
     along = q @ a
     # the distance from the axis summed column by column: the rounding of np.linalg.norm(axis=1) over
     # three columns, without its (K, 3) temporaries
-    d = q[:, 0] - along * a[0]
-    across2 = d * d
-    for j in (1, 2):
-        d = q[:, j] - along * a[j]
-        across2 += d * d
-    return along / np.maximum(np.sqrt(across2), 1e-9)
+    d = np.empty_like(along)
+    across2 = np.empty_like(along)
+    for j in range(3):
+        np.multiply(along, a[j], out=d)
+        np.subtract(q[:, j], d, out=d)
+        if j == 0:
+            np.multiply(d, d, out=across2)
+        else:
+            across2 += np.multiply(d, d, out=d)
+    np.sqrt(across2, out=across2)
+    return np.divide(along, np.maximum(across2, 1e-9, out=across2), out=along)
 
 
 def in_sorted(x: np.ndarray, sorted_values: np.ndarray) -> np.ndarray:
@@ -137,7 +152,7 @@ def lit_cells(rays, planes, labels, which, bins: float = 0.002) -> np.ndarray:
     if len(which) == 0:
         return np.zeros(0, np.int64)
     p = intersect(rays.take(which, axis=0), planes.take(labels[which], axis=0))
-    e = np.floor(projector_elevation(p, planes) / bins).astype(np.int64)
+    e = elevation_bins(p, planes, bins)
     return np.unique(labels[which] * 1_000_000 + e)
 
 
@@ -169,7 +184,7 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
     k = k.ravel().take(flat)
     # every offset's points at once (row by row the numbers of one offset at a time)
     p = intersect(rays.take(sub, axis=0).take(i, axis=0), planes.take(k, axis=0))
-    e = np.floor(projector_elevation(p, planes) / bins).astype(np.int64)
+    e = elevation_bins(p, planes, bins)
     cells, hits = _distinct_cells(rows[at], k, e, len(offs), n, deep)
     conflicts = {int(o): float(hits[j] / cells[j]) for j, o in enumerate(offs) if weighed[j]}
     if not conflicts:
