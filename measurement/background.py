@@ -64,7 +64,7 @@ def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray,
         unsure = np.abs(gap, out=gap) > 1e-6
         unsure &= np.abs(z, out=gap) < 1e5
         np.logical_not(unsure, out=unsure)
-        i, k = np.nonzero(unsure)
+        i, k = np.divmod(np.flatnonzero(unsure), unsure.shape[1])  # np.nonzero is slow on 2-D masks
         if len(i):
             near[i, k] = _near_exact(r[i] * z[i, k][:, None], normals, bg_planes[:, 3], tol_mm)
         out[a:a + chunk] = near
