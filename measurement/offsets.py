@@ -185,8 +185,8 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
     # every offset's points at once (row by row the numbers of one offset at a time)
     p = intersect(rays.take(sub, axis=0).take(i, axis=0), planes.take(k, axis=0))
     e = elevation_bins(p, planes, bins)
-    cells, hits = _distinct_cells(rows[at], k, e, len(offs), n, deep)
-    conflicts = {int(o): float(hits[j] / cells[j]) for j, o in enumerate(offs) if weighed[j]}
+    cells, hits = _distinct_cells(at, k, e, len(rows), n, deep)
+    conflicts = {int(offs[j]): float(hits[w] / cells[w]) for w, j in enumerate(rows)}
     if not conflicts:
         return None
     if _log.isEnabledFor(logging.DEBUG):
