@@ -183,7 +183,8 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
     at, i = np.divmod(flat, len(sub))
     k = k.ravel().take(flat)
     # every offset's points at once (row by row the numbers of one offset at a time)
-    p = intersect(rays.take(sub, axis=0).take(i, axis=0), planes.take(k, axis=0))
+    ray = rays.take(sub, axis=0).take(i, axis=0)
+    p = intersect(ray, planes.take(k, axis=0), out=ray)
     e = elevation_bins(p, planes, bins)
     cells, hits = _distinct_cells(at, k, e, len(rows), n, deep)
     conflicts = {int(offs[j]): float(hits[w] / cells[w]) for w, j in enumerate(rows)}
