@@ -479,8 +479,10 @@ def _segment_steps(seg, rays, planes, table, left, right, tol_mm,
     ``since`` : the steps of an earlier ``table`` that has only gained labels since, and the segments (S,)
     to measure again (``_touching`` the new ones); the others keep their earlier steps."""
     out = {}
-    labelled = table[seg] >= 0
-    idx = np.flatnonzero(labelled if since is None else labelled & since[1][seg])
+    measured = table >= 0
+    if since is not None:
+        measured &= since[1]
+    idx = np.flatnonzero(measured[seg])
     k = table[seg[idx]]
     z = depth_on(rays.take(idx, axis=0), planes.take(k, axis=0))
     for sign, nb in ((1, left), (-1, right)):
