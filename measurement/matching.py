@@ -315,16 +315,15 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
     table = _label_table(seg, seg_label)
     good = np.bincount(seg, weights=reliable(c), minlength=seg.max() + 1) >= 0.6 * np.bincount(
         seg, minlength=seg.max() + 1)
-    sids = np.unique(seg)
     order = np.lexsort((c.v, seg))
     s_sorted = seg[order]
-    starts = np.searchsorted(s_sorted, sids)
-    ends = np.searchsorted(s_sorted, sids, side="right") - 1
+    runs = np.r_[0, np.flatnonzero(s_sorted[1:] != s_sorted[:-1]) + 1, len(seg)]  # a segment each, top down
+    sids = s_sorted[runs[:-1]]
     first = np.full(seg.max() + 1, -1)
     last = np.full(seg.max() + 1, -1)
-    first[sids], last[sids] = order[starts], order[ends]
+    first[sids], last[sids] = order[runs[:-1]], order[runs[1:] - 1]
     in_mask = np.zeros(seg.max() + 1, bool)
-    in_mask[np.unique(seg[mask])] = True
+    in_mask[seg[mask]] = True
     is_animal = np.zeros(seg.max() + 1, bool)
     is_animal[np.fromiter(animal, np.int64, len(animal))] = True
     span = 4.0 * (float(c.u.max()) + link_px + 1.0)  # row key stride: wider than any column plus the link
