@@ -122,8 +122,10 @@ def background_like(rays, planes, seg, mask, bg_planes, exclude: set, share: flo
     """(M,) True for centres of segments (in ``mask``, not in ``exclude``) that some stripe index puts
     on a background plane for at least ``share`` of their points. depth : as in claim_background"""
     out = np.zeros(len(seg), bool)
-    sids = np.unique(seg[mask])
-    sids = sids[~np.isin(sids, np.fromiter(exclude, np.int64, len(exclude)))]
+    weigh = np.zeros(seg.max() + 1, bool)
+    weigh[seg[mask]] = True
+    weigh[np.fromiter(exclude, np.int64, len(exclude))] = False
+    sids = np.flatnonzero(weigh)
     frac, idx, starts = _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, 8.0, depth)
     like = frac.max(axis=1, initial=0.0) >= share
     out[idx[np.repeat(like, np.diff(starts))]] = True
