@@ -151,9 +151,24 @@ def lit_cells(rays, planes, labels, which, bins: float = 0.002) -> np.ndarray:
     (indices) with stripe ``labels[which]``."""
     if len(which) == 0:
         return np.zeros(0, np.int64)
-    p = intersect(rays.take(which, axis=0), planes.take(labels[which], axis=0))
-    e = elevation_bins(p, planes, bins)
-    return np.unique(labels[which] * 1_000_000 + e)
+    k = labels[which]
+    ray = rays.take(which, axis=0)
+    e = elevation_bins(intersect(ray, planes.take(k, axis=0), out=ray), planes, bins)
+    return _unique_cells(k, e, len(planes))
+
+
+def _unique_cells(stripe: np.ndarray, e: np.ndarray, n: int) -> np.ndarray:
+    """``np.unique(stripe * 1_000_000 + e)`` for stripes (K,) and elevation bins (K,): by a bitmap of the
+    (stripe, bin) cells when the stripes lie in [0, n) and the bins within +-4e5 (keys ordered alike)."""
+    lo, hi = (int(e.min()), int(e.max())) if len(e) else (0, 0)
+    bins = hi - lo + 1
+    if not (lo > -400_000 and hi < 400_000 and n * bins <= 20_000_000 and len(e)
+            and stripe.min() >= 0 and stripe.max() < n):
+        return np.unique(stripe * 1_000_000 + e)
+    mark = np.zeros(n * bins, bool)
+    mark[stripe * bins + (e - lo)] = True
+    k, b = np.divmod(np.flatnonzero(mark), bins)
+    return k * 1_000_000 + (b + lo)
 
 
 def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.ndarray | None = None
