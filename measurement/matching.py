@@ -41,6 +41,7 @@ from .offsets import (
     projector_elevation,
     projector_right,
     sharp_minimum,
+    union_sorted,
 )
 from .segments import (
     denoise,
@@ -383,7 +384,7 @@ def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, know
     out: dict[int, int] = {}
     cl = _labels_of(seg, seg_label, long_seg)
     # labels only join seg_label, never change: the centres labelled since add their cells
-    lit = np.union1d(lit, lit_cells(rays, planes, cl, np.flatnonzero((cl >= 0) & (cl != known))))
+    lit = union_sorted(lit, lit_cells(rays, planes, cl, np.flatnonzero((cl >= 0) & (cl != known))))
     mid = n // 2
     for idx, trial in small:
         if (cl[idx] >= 0).any():
@@ -409,7 +410,7 @@ def _claim(rays, planes, cl, lit, idx, lab) -> np.ndarray:
     own shadow)."""
     inside = (lab >= 0) & (lab < len(planes))
     cl[idx[inside]] = lab[inside]
-    return np.union1d(lit, lit_cells(rays, planes, cl, idx[inside]))
+    return union_sorted(lit, lit_cells(rays, planes, cl, idx[inside]))
 
 
 def _relative(seg: np.ndarray, trial: dict[int, int], mid: int) -> np.ndarray:

@@ -89,6 +89,11 @@ def in_sorted(x: np.ndarray, sorted_values: np.ndarray) -> np.ndarray:
     return sorted_values[pos] == x
 
 
+def union_sorted(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.union1d(a, b)`` for sorted arrays of distinct values: one merge instead of a sort."""
+    return np.sort(np.concatenate([a, b[~in_sorted(b, a)]]), kind="stable")
+
+
 def _thinned(idx: np.ndarray, most: int = 20000) -> np.ndarray:
     """``idx`` (K,), every j-th entry when there are more than ``most`` (a piece's shape survives it)."""
     return idx if len(idx) <= most else idx[:: len(idx) // most + 1]
