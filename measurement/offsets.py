@@ -186,8 +186,8 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
         return None
     if lit is None:
         lit = lit_cells(rays, planes, cl, bg, bins)
-    deep = lit[in_sorted(lit - 2, lit) & in_sorted(lit + 2, lit) & in_sorted(lit - 1, lit)
-               & in_sorted(lit + 1, lit)]  # sorted too
+    # cells lit two bins either side too: in sorted distinct keys, five in a row span four
+    deep = lit[2:-2][lit[4:] - lit[:-4] == 4]
     rr = r[idx]
     sub = _thinned(idx)
     offs = np.arange(-int(rr.max()), n - int(rr.min()))
