@@ -56,16 +56,27 @@ def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray,
     for a in range(0, len(rays), chunk):
         r, z = rays[a:a + chunk], z_all[a:a + chunk]
         along = r @ normals  # (m, P)
-        d = np.abs(z * along[:, :1] - bg_planes[0, 3])
+        d = _plane_gap(z, along[:, :1], bg_planes[0, 3])
         for p in range(1, len(bg_planes)):  # fmin skips NaN (ray parallel to a plane) like the exact min
-            d = np.fmin(d, np.abs(z * along[:, p:p + 1] - bg_planes[p, 3]))
+            np.fmin(d, _plane_gap(z, along[:, p:p + 1], bg_planes[p, 3]), out=d)
         near = d < tol_mm
-        unsure = ~(np.abs(d - tol_mm) > 1e-6) | ~(np.abs(z) < 1e5)  # rounding could decide, or NaN/far
-        i, k = np.nonzero(unsure)
+        # rounding could decide, or NaN/far
+        gap = np.subtract(d, tol_mm, out=d)
+        unsure = np.abs(gap, out=gap) > 1e-6
+        unsure &= np.abs(z, out=gap) < 1e5
+        np.logical_not(unsure, out=unsure)
+        i, k = np.divmod(np.flatnonzero(unsure), unsure.shape[1])  # np.nonzero is slow on 2-D masks
         if len(i):
             near[i, k] = _near_exact(r[i] * z[i, k][:, None], normals, bg_planes[:, 3], tol_mm)
         out[a:a + chunk] = near
     return out
+
+
+def _plane_gap(z: np.ndarray, along: np.ndarray, d: float) -> np.ndarray:
+    """|z along - d| (m, N) for depths z (m, N) and ray . normal ``along`` (m, 1), in one buffer."""
+    out = np.multiply(z, along)
+    out -= d
+    return np.abs(out, out=out)
 
 
 def _near_exact(points: np.ndarray, normals: np.ndarray, d: np.ndarray, tol_mm: float) -> np.ndarray:
@@ -112,8 +123,10 @@ def background_like(rays, planes, seg, mask, bg_planes, exclude: set, share: flo
     """(M,) True for centres of segments (in ``mask``, not in ``exclude``) that some stripe index puts
     on a background plane for at least ``share`` of their points. depth : as in claim_background"""
     out = np.zeros(len(seg), bool)
-    sids = np.unique(seg[mask])
-    sids = sids[~np.isin(sids, np.fromiter(exclude, np.int64, len(exclude)))]
+    weigh = np.zeros(seg.max() + 1, bool)
+    weigh[seg[mask]] = True
+    weigh[np.fromiter(exclude, np.int64, len(exclude))] = False
+    sids = np.flatnonzero(weigh)
     frac, idx, starts = _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, 8.0, depth)
     like = frac.max(axis=1, initial=0.0) >= share
     out[idx[np.repeat(like, np.diff(starts))]] = True

@@ -41,6 +41,7 @@ from .offsets import (
     projector_elevation,
     projector_right,
     sharp_minimum,
+    union_sorted,
 )
 from .segments import (
     denoise,
@@ -270,12 +271,12 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         _grow_all(c, rays, planes, seg, trial, remaining, left, right, tol, n, None, depth_only=True, pairs=pool)
         in_trial = np.zeros(seg.max() + 1, bool)
         in_trial[np.fromiter(trial, np.int64)] = True
-        _refine(rays, planes, seg, trial, _subset(pool, [in_trial[p[3]] for p in pool]), tol, n)  # members stay
+        _refine(rays, planes, seg, trial, pool.take(in_trial[pool.own_seg]), tol, n)  # members stay
         in_cluster = in_trial[seg] & remaining
         remaining &= ~in_cluster
         idx = np.nonzero(in_cluster)[0]
         sizes -= np.bincount(seg[idx], minlength=len(sizes))
-        pool = _subset(pool, [remaining[p[0]] for p in pool])
+        pool = pool.take(remaining[pool.idx])
         biggest = max(biggest, len(idx))
         if len(idx) < max(50, SMALL_PIECE * biggest):  # too little shadow evidence of its own
             if len(idx) >= 50:
@@ -345,16 +346,15 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
     table = _label_table(seg, seg_label)
     good = np.bincount(seg, weights=reliable(c), minlength=seg.max() + 1) >= 0.6 * np.bincount(
         seg, minlength=seg.max() + 1)
-    sids = np.unique(seg)
     order = np.lexsort((c.v, seg))
     s_sorted = seg[order]
-    starts = np.searchsorted(s_sorted, sids)
-    ends = np.searchsorted(s_sorted, sids, side="right") - 1
+    runs = np.r_[0, np.flatnonzero(s_sorted[1:] != s_sorted[:-1]) + 1, len(seg)]  # a segment each, top down
+    sids = s_sorted[runs[:-1]]
     first = np.full(seg.max() + 1, -1)
     last = np.full(seg.max() + 1, -1)
-    first[sids], last[sids] = order[starts], order[ends]
+    first[sids], last[sids] = order[runs[:-1]], order[runs[1:] - 1]
     in_mask = np.zeros(seg.max() + 1, bool)
-    in_mask[np.unique(seg[mask])] = True
+    in_mask[seg[mask]] = True
     is_animal = np.zeros(seg.max() + 1, bool)
     is_animal[np.fromiter(animal, np.int64, len(animal))] = True
     span = 4.0 * (float(c.u.max()) + link_px + 1.0)  # row key stride: wider than any column plus the link
@@ -414,7 +414,7 @@ def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, know
     out: dict[int, int] = {}
     cl = _labels_of(seg, seg_label, long_seg)
     # labels only join seg_label, never change: the centres labelled since add their cells
-    lit = np.union1d(lit, lit_cells(rays, planes, cl, np.flatnonzero((cl >= 0) & (cl != known))))
+    lit = union_sorted(lit, lit_cells(rays, planes, cl, np.flatnonzero((cl >= 0) & (cl != known))))
     mid = n // 2
     for idx, trial in small:
         if (cl[idx] >= 0).any():
@@ -440,7 +440,7 @@ def _claim(rays, planes, cl, lit, idx, lab) -> np.ndarray:
     own shadow)."""
     inside = (lab >= 0) & (lab < len(planes))
     cl[idx[inside]] = lab[inside]
-    return np.union1d(lit, lit_cells(rays, planes, cl, idx[inside]))
+    return union_sorted(lit, lit_cells(rays, planes, cl, idx[inside]))
 
 
 def _relative(seg: np.ndarray, trial: dict[int, int], mid: int) -> np.ndarray:
@@ -464,8 +464,8 @@ def _labels_of(seg: np.ndarray, seg_label: dict[int, int], long_seg: np.ndarray)
 
 def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, bg_planes=None,
               depth_only=False, avoid_planes=None, gaps=(1, 2, 3), min_share=0.6, slope=False,
-              pairs: _Pairs | None = None) -> np.ndarray:
-    """Grow labels along continuous surfaces until nothing changes; returns per-centre labels.
+              pairs: _Pairs | None = None) -> None:
+    """Grow labels along continuous surfaces until nothing changes (updates ``seg_label`` in place).
     With ``bg_planes`` a segment only joins when its points then lie on those planes; with
     ``avoid_planes`` only when they do not. With ``slope`` (depth only) the neighbour's depth is
     extrapolated by its own step from the stripe beyond it, so a steep surface keeps growing.
@@ -498,7 +498,6 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
         newly[grown] = True
         if steps is not None:
             since = (steps, _touching(seg, left, right, newly))
-    return _labels_of(seg, seg_label, long_seg)
 
 
 def _segment_steps(seg, rays, planes, table, left, right, tol_mm,
@@ -510,8 +509,10 @@ def _segment_steps(seg, rays, planes, table, left, right, tol_mm,
     ``since`` : the steps of an earlier ``table`` that has only gained labels since, and the segments (S,)
     to measure again (``_touching`` the new ones); the others keep their earlier steps."""
     out = {}
-    labelled = table[seg] >= 0
-    idx = np.flatnonzero(labelled if since is None else labelled & since[1][seg])
+    measured = table >= 0
+    if since is not None:
+        measured &= since[1]
+    idx = np.flatnonzero(measured[seg])
     k = table[seg[idx]]
     z = depth_on(rays.take(idx, axis=0), planes.take(k, axis=0))
     for sign, nb in ((1, left), (-1, right)):
@@ -552,14 +553,38 @@ def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
     return float(np.median(np.linalg.norm(a - b, axis=1)))
 
 
-_Pairs = list[tuple[np.ndarray, np.ndarray, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
+class _Pairs:
+    """Row-neighbour pairs across segments, the left side's first, then the right side's: rows (7, K) of
+    the centre, its row neighbour on that side (in another segment), the sign of the label step toward
+    the centre (1 from the left, -1 from the right), the segments of both, and the neighbour's own
+    neighbour further out with its segment (-1 where none). Unpacks into those seven rows."""
+
+    def __init__(self, cols: np.ndarray) -> None:
+        self.cols = cols
+
+    def __iter__(self):
+        return iter(self.cols)
+
+    @property
+    def idx(self) -> np.ndarray:
+        return self.cols[0]
+
+    @property
+    def own_seg(self) -> np.ndarray:
+        return self.cols[3]
+
+    @property
+    def nb_seg(self) -> np.ndarray:
+        return self.cols[4]
+
+    def take(self, at: np.ndarray) -> _Pairs:
+        """The pairs at positions (or flagged in the mask) ``at``, in their order."""
+        return _Pairs(self.cols.take(np.flatnonzero(at) if at.dtype == bool else at, axis=1))
 
 
 def _neighbour_pairs(seg, mask, left, right) -> _Pairs:
-    """Per side (left, then right): the centres (K,) in ``mask`` whose row neighbour on that side lies in
-    another segment, that neighbour (K,), the sign of the label step toward the centre, the segments
-    (K,) of both, and the neighbour's own neighbour further out (K,) with its segment (-1 where none)."""
-    out = []
+    """The centres in ``mask`` whose row neighbour on a side lies in another segment (``_Pairs``)."""
+    parts = []
     members = np.flatnonzero(mask)
     own_all = seg[members]
     for nb, sign in ((left, 1), (right, -1)):
@@ -571,27 +596,20 @@ def _neighbour_pairs(seg, mask, left, right) -> _Pairs:
         idx, nbr, own, other = idx[keep], nbr[keep], own[keep], other[keep]
         far = nb[nbr]
         far_seg = np.where(far >= 0, seg[np.maximum(far, 0)], -1)
-        out.append((idx, nbr, sign, own, other, far, far_seg))
-    return out
+        parts.append((idx, nbr, np.full(len(idx), sign, np.int64), own, other, far, far_seg))
+    return _Pairs(np.concatenate([np.stack(part) for part in parts], axis=1))
 
 
 def _open_pairs(pairs: _Pairs, table: np.ndarray) -> _Pairs:
     """The ``pairs`` whose own segment has no label in ``table`` (S,) yet: only those can vote in growth."""
-    return _subset(pairs, [table[own_seg] < 0 for _, _, _, own_seg, _, _, _ in pairs])
+    return pairs.take(table[pairs.own_seg] < 0)
 
 
 def _beside(pairs: _Pairs, flags: np.ndarray) -> np.ndarray:
     """(S,) the own segments of the ``pairs`` whose neighbour's segment is flagged in ``flags`` (S,)."""
     out = np.zeros(len(flags), bool)
-    for _, _, _, own_seg, nb_seg, _, _ in pairs:
-        out[own_seg[flags[nb_seg]]] = True
+    out[pairs.own_seg[flags[pairs.nb_seg]]] = True
     return out
-
-
-def _subset(pairs: _Pairs, keep: list[np.ndarray]) -> _Pairs:
-    """Per side, the ``pairs`` flagged in that side's ``keep`` (K,)."""
-    return [(idx[k], nbr[k], sign, own_seg[k], nb_seg[k], far[k], far_seg[k])
-            for (idx, nbr, sign, own_seg, nb_seg, far, far_seg), k in zip(pairs, keep, strict=True)]
 
 
 def _label_table(seg: np.ndarray, seg_label: dict[int, int]) -> np.ndarray:
@@ -608,75 +626,77 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
     """One round of voting on label ``table`` (S,) by neighbour ``pairs``: segment -> label for the
     segments (unlabelled ones, or with ``relabel`` labelled ones) whose row neighbours agree on a label
     that continues their surface, for the segments flagged in ``active`` (S,) (all when None)."""
-    voters, votes = [], []
-    for idx, nbr, sign, own_seg, nb_seg, far, far_seg in pairs:
-        if active is not None:  # the few pairs of active segments first, in their order
-            at = np.flatnonzero(active[own_seg])
-            idx, nbr, own_seg, nb_seg, far, far_seg = idx[at], nbr[at], own_seg[at], nb_seg[at], far[at], far_seg[at]
-        own, kn = table[own_seg], table[nb_seg]
-        take = ((own >= 0) if relabel else (own < 0)) & (kn >= 0)
-        idx, nbr, kn, voter, far, far_seg = idx[take], nbr[take], kn[take], own_seg[take], far[take], far_seg[take]
-        nb_seg = nb_seg[take]
-        if len(idx) == 0:
-            continue
-        if depth_only:
-            zn = depth_on(rays.take(nbr, axis=0), planes.take(kn, axis=0))
-            if slope:
-                # a steep surface (a tail hanging toward its tip) changes depth by a similar step from stripe
-                # to stripe: extrapolate the neighbour's own step where its outer neighbour is the next stripe
-                kf = np.where(far_seg >= 0, table[np.maximum(far_seg, 0)], -1)
-                has = (kf == kn - sign) & (kf >= 0)
-                step = np.zeros(len(idx))
-                if has.any():
-                    zf = depth_on(rays.take(far[has], axis=0), planes.take(kf[has], axis=0))
-                    # only where the stripes are evenly spaced in the image too (no stripes missing between)
-                    near_dx = np.abs(rays[idx[has], 0] - rays[nbr[has], 0])
-                    far_dx = np.abs(rays[nbr[has], 0] - rays[far[has], 0])
-                    even = (near_dx < 1.3 * far_dx) & (far_dx < 1.3 * near_dx)
-                    valid = (np.abs(zn[has] - zf) < 2 * tol_mm) & even
-                    step[has] = np.where(valid, zn[has] - zf, 0.0)
-                    # rows past the outer stripe's end (a tail tip: each stripe ends lower) take the mean
-                    # step of their neighbour segment, when at least three of its rows measured one
-                    vi = np.flatnonzero(has)[valid]
-                    cnt = np.bincount(nb_seg[vi], minlength=len(table))
-                    mean = np.bincount(nb_seg[vi], weights=step[vi], minlength=len(table)) / np.maximum(cnt, 1)
-                    fill = ~has & (cnt[nb_seg] >= 3)
-                    step[fill] = mean[nb_seg[fill]]
-                if seg_steps is not None:  # else the neighbour segment's own mean step over all its rows
-                    own_step = seg_steps[sign][nb_seg]
-                    rest = ~has & (step == 0.0) & np.isfinite(own_step)
-                    step[rest] = own_step[rest]
-        else:
-            pn = intersect(rays.take(nbr, axis=0), planes.take(kn, axis=0))
-        # the voters' points on the planes of every gap at once (row by row as one gap at a time)
-        ks = [kn + sign * gap for gap in gaps]
-        on_k = np.clip(np.concatenate(ks), 0, n - 1)
-        voter_rays = np.tile(rays.take(idx, axis=0), (len(gaps), 1))
-        if depth_only:
-            z_gap = depth_on(voter_rays, planes.take(on_k, axis=0)).reshape(len(gaps), -1)
-        else:
-            p_gap = intersect(voter_rays, planes.take(on_k, axis=0)).reshape(len(gaps), -1, 3)
-        best_k = np.full(len(idx), -1)
-        best_d = np.full(len(idx), np.inf)
-        for g, gap in enumerate(gaps):
-            k = ks[g]
-            okk = (k >= 0) & (k < n)
-            if depth_only:
-                # on a curved body, depth continuity separates a right index (median 3 mm on the simulated
-                # fox, 99 % under 36) from a wrong one (a whole depth step, 35-75 mm) better than 3-D gaps
-                d = np.abs(z_gap[g] - (zn + step * gap if slope else zn))
-                # a missing stripe is the rarer event: a wider gap must fit clearly better to win (a
-                # steep flank seen from above makes the right gap of one look discontinuous)
-                d = d + (gap - 1) * GAP_PENALTY_MM
-            else:  # on flat backgrounds the 3-D gap per stripe is the sharper test
-                d = np.linalg.norm(p_gap[g] - pn, axis=1) / gap
-            better = okk & (d < best_d) & (d < tol_mm)
-            best_k[better], best_d[better] = k[better], d[better]
-        voters.append(voter)
-        votes.append(best_k)
-    if not voters:
+    at = np.flatnonzero(active[pairs.own_seg]) if active is not None else np.arange(pairs.cols.shape[1])
+    own, kn = table[pairs.own_seg[at]], table[pairs.nb_seg[at]]
+    take = ((own >= 0) if relabel else (own < 0)) & (kn >= 0)
+    idx, nbr, sign, voter, nb_seg, far, far_seg = pairs.take(at[take])
+    kn = kn[take]
+    if len(idx) == 0:
         return {}
-    return _majority(np.concatenate(voters), np.concatenate(votes), n, min_share)
+    if depth_only:
+        zn = depth_on(rays.take(nbr, axis=0), planes.take(kn, axis=0))
+        if slope:
+            step = _slope_steps(rays, planes, table, idx, nbr, sign, nb_seg, far, far_seg, kn, zn, tol_mm,
+                                seg_steps)
+    else:
+        pn = intersect(rays.take(nbr, axis=0), planes.take(kn, axis=0))
+    # the voters' points on the planes of every gap at once (row by row as one gap at a time)
+    ks = [kn + sign * gap for gap in gaps]
+    on_k = np.clip(np.concatenate(ks), 0, n - 1)
+    voter_rays = np.tile(rays.take(idx, axis=0), (len(gaps), 1))
+    if depth_only:
+        z_gap = depth_on(voter_rays, planes.take(on_k, axis=0)).reshape(len(gaps), -1)
+    else:
+        p_gap = intersect(voter_rays, planes.take(on_k, axis=0)).reshape(len(gaps), -1, 3)
+    best_k = np.full(len(idx), -1)
+    best_d = np.full(len(idx), np.inf)
+    for g, gap in enumerate(gaps):
+        k = ks[g]
+        okk = (k >= 0) & (k < n)
+        if depth_only:
+            # on a curved body, depth continuity separates a right index (median 3 mm on the simulated
+            # fox, 99 % under 36) from a wrong one (a whole depth step, 35-75 mm) better than 3-D gaps
+            d = np.abs(z_gap[g] - (zn + step * gap if slope else zn))
+            # a missing stripe is the rarer event: a wider gap must fit clearly better to win (a
+            # steep flank seen from above makes the right gap of one look discontinuous)
+            d = d + (gap - 1) * GAP_PENALTY_MM
+        else:  # on flat backgrounds the 3-D gap per stripe is the sharper test
+            d = np.linalg.norm(p_gap[g] - pn, axis=1) / gap
+        better = okk & (d < best_d) & (d < tol_mm)
+        best_k[better], best_d[better] = k[better], d[better]
+    return _majority(voter, best_k, n, min_share)
+
+
+def _slope_steps(rays, planes, table, idx, nbr, sign, nb_seg, far, far_seg, kn, zn, tol_mm,
+                 seg_steps: dict[int, np.ndarray] | None) -> np.ndarray:
+    """The depth step (K,) mm per stripe by which each voting pair's neighbour depth ``zn`` (K,) on its
+    label ``kn`` (K,) is extrapolated toward the voter (0 where nothing measures one)."""
+    # a steep surface (a tail hanging toward its tip) changes depth by a similar step from stripe
+    # to stripe: extrapolate the neighbour's own step where its outer neighbour is the next stripe
+    kf = np.where(far_seg >= 0, table[np.maximum(far_seg, 0)], -1)
+    has = (kf == kn - sign) & (kf >= 0)
+    step = np.zeros(len(idx))
+    if has.any():
+        zf = depth_on(rays.take(far[has], axis=0), planes.take(kf[has], axis=0))
+        # only where the stripes are evenly spaced in the image too (no stripes missing between)
+        near_dx = np.abs(rays[idx[has], 0] - rays[nbr[has], 0])
+        far_dx = np.abs(rays[nbr[has], 0] - rays[far[has], 0])
+        even = (near_dx < 1.3 * far_dx) & (far_dx < 1.3 * near_dx)
+        valid = (np.abs(zn[has] - zf) < 2 * tol_mm) & even
+        step[has] = np.where(valid, zn[has] - zf, 0.0)
+        # rows past the outer stripe's end (a tail tip: each stripe ends lower) take the mean
+        # step of their neighbour segment on that side, when at least three of its rows measured one
+        key = np.where(sign > 0, nb_seg, nb_seg + len(table))
+        vi = np.flatnonzero(has)[valid]
+        cnt = np.bincount(key[vi], minlength=2 * len(table))
+        mean = np.bincount(key[vi], weights=step[vi], minlength=2 * len(table)) / np.maximum(cnt, 1)
+        fill = ~has & (cnt[key] >= 3)
+        step[fill] = mean[key[fill]]
+    if seg_steps is not None:  # else the neighbour segment's own mean step over all its rows
+        own_step = np.where(sign > 0, seg_steps[1][nb_seg], seg_steps[-1][nb_seg])
+        rest = ~has & (step == 0.0) & np.isfinite(own_step)
+        step[rest] = own_step[rest]
+    return step
 
 
 def _majority(voter: np.ndarray, vote: np.ndarray, n: int, min_share: float) -> dict[int, int]:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
+from functools import lru_cache
 
 import numpy as np
 
@@ -22,35 +23,62 @@ def projector_centre(planes: np.ndarray) -> np.ndarray:
     """A point on the axis that all light planes share, at the camera's height (y = 0): the projector
     centre of a level rig. The planes alone cannot fix it along the axis; a few centimetres off only
     tilts rays by the ratio of that error to the working distance."""
-
-    p0, a = pencil_axis(planes)
-    return p0 - a * (p0[1] / a[1]) if abs(a[1]) > 1e-6 else p0
+    return _projector_frame(planes)[0].copy()
 
 
 def projector_right(planes: np.ndarray) -> bool:
     """Whether the projector sits right of the camera (positive x), from the planes' shared axis."""
-    return bool(projector_centre(planes)[0] > 0)
+    return bool(_projector_frame(planes)[0][0] > 0)
 
 
 def projector_elevation(points: np.ndarray, planes: np.ndarray) -> np.ndarray:
     """Elevation of each point (M, 3) as seen from the projector along its stripe: tan of the angle
     between the ray and the plane perpendicular to the shared axis (the projector's row coordinate)."""
+    centre, a = _projector_frame(planes)
+    return _elevation(points - centre, a)
 
-    _, a = pencil_axis(planes)
-    return _elevation(points, projector_centre(planes), a)
+
+def _projector_frame(planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The projector centre (3,) mm and the planes' shared axis (3,) (read-only), computed once per
+    set of light planes (N, 4): a scan asks for them dozens of times."""
+    planes = np.ascontiguousarray(planes)
+    return _frame_of(planes.tobytes(), planes.dtype.str, planes.shape)
 
 
-def _elevation(points: np.ndarray, centre: np.ndarray, a: np.ndarray) -> np.ndarray:
-    q = points - centre
+@lru_cache(maxsize=8)
+def _frame_of(data: bytes, dtype: str, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
+    p0, a = pencil_axis(np.frombuffer(data, dtype).reshape(shape))
+    centre = p0 - a * (p0[1] / a[1]) if abs(a[1]) > 1e-6 else p0
+    centre.flags.writeable = False
+    a.flags.writeable = False
+    return centre, a
+
+
+def elevation_bins(points: np.ndarray, planes: np.ndarray, bins: float) -> np.ndarray:
+    """``floor(projector_elevation(points, planes) / bins)`` (K,) int64 for points (K, 3) mm, which are
+    used as scratch (overwritten)."""
+    points -= _projector_frame(planes)[0]
+    e = _elevation(points, _projector_frame(planes)[1])
+    np.divide(e, bins, out=e)
+    return np.floor(e, out=e).astype(np.int64)
+
+
+def _elevation(q: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """Elevation (K,) of points q (K, 3) relative to the projector centre about the unit axis a (3,)."""
     along = q @ a
     # the distance from the axis summed column by column: the rounding of np.linalg.norm(axis=1) over
     # three columns, without its (K, 3) temporaries
-    d = q[:, 0] - along * a[0]
-    across2 = d * d
-    for j in (1, 2):
-        d = q[:, j] - along * a[j]
-        across2 += d * d
-    return along / np.maximum(np.sqrt(across2), 1e-9)
+    d = np.empty_like(along)
+    across2 = np.empty_like(along)
+    for j in range(3):
+        np.multiply(along, a[j], out=d)
+        np.subtract(q[:, j], d, out=d)
+        if j == 0:
+            np.multiply(d, d, out=across2)
+        else:
+            across2 += np.multiply(d, d, out=d)
+    np.sqrt(across2, out=across2)
+    return np.divide(along, np.maximum(across2, 1e-9, out=across2), out=along)
 
 
 def in_sorted(x: np.ndarray, sorted_values: np.ndarray) -> np.ndarray:
@@ -59,6 +87,11 @@ def in_sorted(x: np.ndarray, sorted_values: np.ndarray) -> np.ndarray:
         return np.zeros(len(x), bool)
     pos = np.minimum(np.searchsorted(sorted_values, x), len(sorted_values) - 1)
     return sorted_values[pos] == x
+
+
+def union_sorted(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.union1d(a, b)`` for sorted arrays of distinct values: one merge instead of a sort."""
+    return np.sort(np.concatenate([a, b[~in_sorted(b, a)]]), kind="stable")
 
 
 def _thinned(idx: np.ndarray, most: int = 20000) -> np.ndarray:
@@ -123,9 +156,24 @@ def lit_cells(rays, planes, labels, which, bins: float = 0.002) -> np.ndarray:
     (indices) with stripe ``labels[which]``."""
     if len(which) == 0:
         return np.zeros(0, np.int64)
-    p = intersect(rays.take(which, axis=0), planes.take(labels[which], axis=0))
-    e = np.floor(projector_elevation(p, planes) / bins).astype(np.int64)
-    return np.unique(labels[which] * 1_000_000 + e)
+    k = labels[which]
+    ray = rays.take(which, axis=0)
+    e = elevation_bins(intersect(ray, planes.take(k, axis=0), out=ray), planes, bins)
+    return _unique_cells(k, e, len(planes))
+
+
+def _unique_cells(stripe: np.ndarray, e: np.ndarray, n: int) -> np.ndarray:
+    """``np.unique(stripe * 1_000_000 + e)`` for stripes (K,) and elevation bins (K,): by a bitmap of the
+    (stripe, bin) cells when the stripes lie in [0, n) and the bins within +-4e5 (keys ordered alike)."""
+    lo, hi = (int(e.min()), int(e.max())) if len(e) else (0, 0)
+    bins = hi - lo + 1
+    if not (lo > -400_000 and hi < 400_000 and n * bins <= 20_000_000 and len(e)
+            and stripe.min() >= 0 and stripe.max() < n):
+        return np.unique(stripe * 1_000_000 + e)
+    mark = np.zeros(n * bins, bool)
+    mark[stripe * bins + (e - lo)] = True
+    k, b = np.divmod(np.flatnonzero(mark), bins)
+    return k * 1_000_000 + (b + lo)
 
 
 def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.ndarray | None = None
@@ -138,24 +186,28 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
         return None
     if lit is None:
         lit = lit_cells(rays, planes, cl, bg, bins)
-    deep = lit[in_sorted(lit - 2, lit) & in_sorted(lit + 2, lit) & in_sorted(lit - 1, lit)
-               & in_sorted(lit + 1, lit)]  # sorted too
+    # cells lit two bins either side too: in sorted distinct keys, five in a row span four
+    deep = lit[2:-2][lit[4:] - lit[:-4] == 4]
     rr = r[idx]
     sub = _thinned(idx)
     offs = np.arange(-int(rr.max()), n - int(rr.min()))
-    k = r[sub][None, :] + offs[:, None]  # (O, S) the stripe of each centre at each offset
-    inside = (k >= 0) & (k < n)
-    # share of the piece that an offset pushes past the first (< 0) or last (>= n) stripe
-    before, past = (k < 0).mean(axis=1), (k >= n).mean(axis=1)
+    # share of the piece that an offset pushes before the first (< 0) or past the last (>= n) stripe
+    rs = np.sort(r[sub])
+    lo, hi = np.searchsorted(rs, -offs), len(rs) - np.searchsorted(rs, n - offs)
+    before, past = lo / len(rs), hi / len(rs)
     beyond = {int(o): (float(b), float(a)) for o, b, a in zip(offs, before, past, strict=True)}
-    weighed = inside.mean(axis=1) >= 0.8
-    at, i = np.nonzero(inside & weighed[:, None])
+    weighed = (len(rs) - lo - hi) / len(rs) >= 0.8
+    rows = np.flatnonzero(weighed)
+    k = r[sub][None, :] + offs[rows, None]  # (W, S) the stripe of each centre at each weighed offset
+    flat = np.flatnonzero((k >= 0) & (k < n))
+    at, i = np.divmod(flat, len(sub))
+    k = k.ravel().take(flat)
     # every offset's points at once (row by row the numbers of one offset at a time)
-    p = intersect(rays.take(sub[i], axis=0), planes.take(k[at, i], axis=0))
-    _, axis = pencil_axis(planes)
-    e = np.floor(_elevation(p, projector_centre(planes), axis) / bins).astype(np.int64)
-    cells, hits = _distinct_cells(at, k[at, i], e, len(offs), n, deep)
-    conflicts = {int(o): float(hits[j] / cells[j]) for j, o in enumerate(offs) if weighed[j]}
+    ray = rays.take(sub, axis=0).take(i, axis=0)
+    p = intersect(ray, planes.take(k, axis=0), out=ray)
+    e = elevation_bins(p, planes, bins)
+    cells, hits = _distinct_cells(at, k, e, len(rows), n, deep)
+    conflicts = {int(offs[j]): float(hits[w] / cells[w]) for w, j in enumerate(rows)}
     if not conflicts:
         return None
     if _log.isEnabledFor(logging.DEBUG):

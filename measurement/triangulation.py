@@ -44,13 +44,14 @@ def rays_at(u: np.ndarray, v: np.ndarray, table: np.ndarray) -> np.ndarray:
     return out
 
 
-def intersect(rays: np.ndarray, planes: np.ndarray) -> np.ndarray:
-    """Points (M, 3) mm where rays (M, 3) meet planes (M, 4) [n, d] (n.X = d); NaN when parallel."""
+def intersect(rays: np.ndarray, planes: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Points (M, 3) mm where rays (M, 3) meet planes (M, 4) [n, d] (n.X = d); NaN when parallel.
+    out : (M, 3) array for the points (``rays`` itself when the caller no longer needs them)"""
     denom = np.einsum("ij,ij->i", rays, planes[:, :3])
     with np.errstate(divide="ignore", invalid="ignore"):
         s = planes[:, 3] / denom
     s[np.abs(denom) < 1e-9] = np.nan
-    return rays * s[:, None]
+    return np.multiply(rays, s[:, None], out=out)
 
 
 def depth_on(rays: np.ndarray, planes: np.ndarray) -> np.ndarray:

@@ -86,7 +86,7 @@ def test_growth_follows_a_steep_surface_by_its_depth_step():
     """A tail hanging toward its tip changes depth by more than the continuity tolerance from stripe to
     stripe; extrapolating the neighbour's own step (where the stripes are evenly spaced) still labels it,
     and never with a wrong index."""
-    from measurement.matching import _grow_all
+    from measurement.matching import _grow_all, _labels_of
 
     planes, rays, seg, left, right, lab = _steep_ramp(-1.2, range(10, 16), np.arange(-40, 40, 2))
     from measurement.triangulation import depth_on
@@ -96,8 +96,9 @@ def test_growth_follows_a_steep_surface_by_its_depth_step():
     long_seg = np.ones(len(seg), bool)
     for slope, expect_all in ((False, False), (True, True)):
         seg_label = {0: 10, 1: 11}  # the two stripes nearest the body are labelled
-        out = _grow_all(None, rays, planes, seg, seg_label, long_seg, left, right, tol, 40, None,
-                        depth_only=True, gaps=(1,), min_share=0.8, slope=slope)
+        _grow_all(None, rays, planes, seg, seg_label, long_seg, left, right, tol, 40, None,
+                  depth_only=True, gaps=(1,), min_share=0.8, slope=slope)
+        out = _labels_of(seg, seg_label, long_seg)
         got = out >= 0
         assert (out[got] == lab[got]).all()
         assert got.all() == expect_all
@@ -107,7 +108,7 @@ def test_growth_down_a_tail_tip_takes_the_neighbours_step_from_its_own_rows():
     """Toward a tail's tip each stripe ends lower, so a stripe's rows beside its labelled neighbour lie
     past the rows where that neighbour has a neighbour of its own: the depth step measured on the
     neighbour's other rows carries the growth on (it stopped there before)."""
-    from measurement.matching import _grow_all
+    from measurement.matching import _grow_all, _labels_of
     from measurement.triangulation import depth_on
 
     def rows(k: int) -> np.ndarray:  # stripe k overlaps k + 1 by 8 rows and never meets k + 2
@@ -118,8 +119,9 @@ def test_growth_down_a_tail_tip_takes_the_neighbours_step_from_its_own_rows():
     tol = 0.8 * float(step.min())
     long_seg = np.ones(len(seg), bool)
     seg_label = {5: 15, 4: 14}
-    out = _grow_all(None, rays, planes, seg, seg_label, long_seg, left, right, tol, 40, None,
-                    depth_only=True, gaps=(1,), min_share=0.8, slope=True)
+    _grow_all(None, rays, planes, seg, seg_label, long_seg, left, right, tol, 40, None,
+              depth_only=True, gaps=(1,), min_share=0.8, slope=True)
+    out = _labels_of(seg, seg_label, long_seg)
     assert (out == lab).all()
 
 
