@@ -193,7 +193,8 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     spacing_mm = _stripe_spacing_mm(c, rays, planes, seg, seg_label, left)
     tol = spacing_mm * params.continuity
     # 3: the background grows over its own surfaces; a segment joins it only if it then lies on them
-    _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, 1.7 * spacing_mm, n, bg_planes)
+    pairs = _neighbour_pairs(seg, long_seg, left, right)  # every growth below takes its centres' share
+    _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, 1.7 * spacing_mm, n, bg_planes, pairs=pairs)
     z_all = depth_for_labels(rays, planes)  # (M, N): every centre on every light plane, computed once
     # 3b: unlabelled pieces of floor or wall (between the legs, beside the outline) are claimed by the
     # one label that puts them on a background plane
@@ -205,7 +206,8 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     bg_cl = _labels_of(seg, seg_label, long_seg)
     bg_lit = lit_cells(rays, planes, bg_cl, np.flatnonzero(bg_cl >= 0))
     fg_labels, small, cl, lit, first = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol,
-                                                   n, z_all, weighed, params.depth_range_mm, bg_planes, bg_lit)
+                                                   n, z_all, weighed, params.depth_range_mm, bg_planes, bg_lit,
+                                                   pairs)
     if fg_labels:
         # pieces of the animal without shadow evidence of their own continue a labelled piece's surface
         is_bg = np.zeros(seg.max() + 1, bool)
@@ -213,8 +215,9 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
         fg_mask = long_seg & ~is_bg[seg]
         if bg_planes is not None:  # leave alone what some index would put on the floor or wall
             fg_mask &= ~background_like(rays, planes, seg, fg_mask, bg_planes, set(fg_labels), depth=z_all)
+        fg_pairs = pairs.of(fg_mask)
         _grow_all(c, rays, planes, seg, fg_labels, fg_mask, left, right, tol, n, None, depth_only=True,
-                  gaps=(1,), min_share=0.8, slope=True)
+                  gaps=(1,), min_share=0.8, slope=True, pairs=fg_pairs)
     seg_label.update(fg_labels)
     if fg_labels:  # a stripe cut into pieces along its length (a tail tip) keeps its label
         seg_label.update(_continue_along(c, rays, planes, seg, seg_label, fg_mask, set(fg_labels), link,
@@ -223,8 +226,8 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
         seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit))
     if fg_labels and first is not None:  # the whole animal weighed again, with what joined after the first piece
         fg = {s: k for s, k in seg_label.items() if s not in bg_labels}
-        shift = _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg, fg_mask, long_seg, left, right, tol,
-                                    n, bg_planes, first)
+        shift = _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg, fg_mask, fg_pairs, long_seg, left,
+                                    right, tol, n, bg_planes, first)
         if shift:
             seg_label = {**bg_labels, **{s: k + shift for s, k in fg.items() if 0 <= k + shift < n}}
             if _TRACE is not None:  # (no centres, no relative labels, the shift of every animal label)
@@ -239,10 +242,10 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
 
 
 def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, weighed, zrange,
-                bg_planes, bg_lit) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None]:
+                bg_planes, bg_lit, pairs: _Pairs) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None]:
     """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
     (M,) the centres of every piece that was weighed for an offset. ``bg_lit`` : the projector cells lit at
-    the labels of ``seg_label`` (``lit_cells``). Also returns the per-centre labels
+    the labels of ``seg_label`` (``lit_cells``); ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``. Also returns the per-centre labels
     (M,) of the background and the placed pieces, the projector cells they light (``lit_cells``) and the
     centres (K,) of the first piece placed (None if none was).
 
@@ -255,7 +258,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     labelled[list(seg_label)] = True
     remaining = long_seg & ~labelled[seg]
     sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)  # centres left per segment
-    pool = _neighbour_pairs(seg, remaining, left, right)  # of the centres left
+    pool = pairs.of(remaining)  # of the centres left
     cl = _labels_of(seg, seg_label, long_seg)
     lit = bg_lit
     mid = n // 2
@@ -302,11 +305,11 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     return out, small, cl, lit, first
 
 
-def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask, long_seg, left, right, tol, n,
+def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask, fg_pairs, long_seg, left, right, tol, n,
                         bg_planes, first, max_behind: float = 0.001, evidence_share: float = 0.6) -> int:
     """Stripes (0 or a shift away from the conflicts) by which to move every animal label in ``fg_labels``
     (segment -> label), from the conflict curve of all of them together against the background's labels
-    ``bg_cl`` (M,) and the cells they light ``bg_lit``.
+    ``bg_cl`` (M,) and the cells they light ``bg_lit``; ``fg_pairs`` : the ``_neighbour_pairs`` of ``fg_mask``.
 
     The first piece's offset was read from its own outline; an extremity on the lit side that joined only
     later (a tail seen from above, linked again only after growth, continuation or a small piece) leaves
@@ -319,7 +322,7 @@ def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask,
     ``first`` (K,) would put more than ``max_behind`` of themselves behind the floor or wall."""
     grown = dict(fg_labels)
     _grow_all(c, rays, planes, seg, grown, fg_mask, left, right, tol, n, None, depth_only=True, gaps=(1,),
-              min_share=evidence_share, slope=True)
+              min_share=evidence_share, slope=True, pairs=fg_pairs)
     r = _labels_of(seg, grown, long_seg)
     idx = np.flatnonzero(r >= 0)
     if len(idx) < 50:
@@ -582,6 +585,11 @@ class _Pairs:
     def take(self, at: np.ndarray) -> _Pairs:
         """The pairs at positions (or flagged in the mask) ``at``, in their order."""
         return _Pairs(self.cols.take(np.flatnonzero(at) if at.dtype == bool else at, axis=1))
+
+    def of(self, mask: np.ndarray) -> _Pairs:
+        """The pairs whose centre is flagged in ``mask`` (M,): the ``_neighbour_pairs`` of ``mask`` when these
+        are those of a superset of it."""
+        return self.take(mask[self.idx])
 
 
 def _neighbour_pairs(seg, mask, left, right) -> _Pairs:
