@@ -35,10 +35,10 @@ from .detection import Centres, reliable
 from .offsets import (
     behind_background,
     conflict_curve,
+    elevation_bins,
     in_sorted,
     lit_cells,
     occlusion_offset,
-    projector_elevation,
     projector_right,
     sharp_minimum,
     union_sorted,
@@ -244,10 +244,10 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
 def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, weighed, zrange,
                 bg_planes, bg_lit, pairs: _Pairs) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None]:
     """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
-    (M,) the centres of every piece that was weighed for an offset. ``bg_lit`` : the projector cells lit at
-    the labels of ``seg_label`` (``lit_cells``); ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``. Also returns the per-centre labels
-    (M,) of the background and the placed pieces, the projector cells they light (``lit_cells``) and the
-    centres (K,) of the first piece placed (None if none was).
+    (M,) the centres of every piece that was weighed for an offset. ``bg_lit`` : the projector cells lit
+    at the labels of ``seg_label`` (``lit_cells``); ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``.
+    Also returns the per-centre labels (M,) of the background and the placed pieces, the projector cells
+    they light (``lit_cells``) and the centres (K,) of the first piece placed (None if none was).
 
     Each piece gets relative indices by depth continuity from a seed (the longest segment left) and is
     placed from its conflict curve, with the pieces placed before it counting as lit; pieces under
@@ -327,12 +327,12 @@ def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask,
     idx = np.flatnonzero(r >= 0)
     if len(idx) < 50:
         return 0
+    r = np.maximum(r, 0)  # occlusion_offset and behind_background read only the animal's centres
     right_side = projector_right(planes)
-    shift = occlusion_offset(rays, planes, bg_cl, np.maximum(r, 0), idx, n, right_side, lit=bg_lit)
+    shift = occlusion_offset(rays, planes, bg_cl, r, idx, n, right_side, lit=bg_lit)
     if not shift or (shift > 0) != right_side:
         return 0
-    if bg_planes is not None and behind_background(rays, planes, np.maximum(r, 0), first, n, bg_planes,
-                                                   shift) > max_behind:
+    if bg_planes is not None and behind_background(rays, planes, r, first, n, bg_planes, shift) > max_behind:
         return 0
     return int(shift)
 
@@ -406,8 +406,7 @@ def _lit_share(rays, planes, seg, sid, k, lit) -> float:
         return 0.0
     ii = np.flatnonzero(seg == sid)
     p = intersect(rays[ii], planes[np.full(len(ii), k)])
-    e = np.floor(projector_elevation(p, planes) / 0.002).astype(np.int64)
-    cells = k * 1_000_000 + e
+    cells = k * 1_000_000 + elevation_bins(p, planes, 0.002)
     return float((in_sorted(cells, lit) & in_sorted(cells - 1, lit) & in_sorted(cells + 1, lit)).mean())
 
 

@@ -31,13 +31,6 @@ def projector_right(planes: np.ndarray) -> bool:
     return bool(_projector_frame(planes)[0][0] > 0)
 
 
-def projector_elevation(points: np.ndarray, planes: np.ndarray) -> np.ndarray:
-    """Elevation of each point (M, 3) as seen from the projector along its stripe: tan of the angle
-    between the ray and the plane perpendicular to the shared axis (the projector's row coordinate)."""
-    centre, a = _projector_frame(planes)
-    return _elevation(points - centre, a)
-
-
 def _projector_frame(planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The projector centre (3,) mm and the planes' shared axis (3,) (read-only), computed once per
     set of light planes (N, 4): a scan asks for them dozens of times."""
@@ -55,10 +48,13 @@ def _frame_of(data: bytes, dtype: str, shape: tuple[int, ...]) -> tuple[np.ndarr
 
 
 def elevation_bins(points: np.ndarray, planes: np.ndarray, bins: float) -> np.ndarray:
-    """``floor(projector_elevation(points, planes) / bins)`` (K,) int64 for points (K, 3) mm, which are
-    used as scratch (overwritten)."""
-    points -= _projector_frame(planes)[0]
-    e = _elevation(points, _projector_frame(planes)[1])
+    """The projector elevation of each point (K, 3) mm, in bins of ``bins``: floor(elevation / bins) (K,)
+    int64. The elevation is the tan of the angle between the projector's ray to the point and the plane
+    perpendicular to the planes' shared axis (the projector's row coordinate). ``points`` is used as
+    scratch (overwritten)."""
+    centre, a = _projector_frame(planes)
+    points -= centre
+    e = _elevation(points, a)
     np.divide(e, bins, out=e)
     return np.floor(e, out=e).astype(np.int64)
 
@@ -90,7 +86,8 @@ def in_sorted(x: np.ndarray, sorted_values: np.ndarray) -> np.ndarray:
 
 
 def union_sorted(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``np.union1d(a, b)`` for sorted arrays of distinct values: one merge instead of a sort."""
+    """``np.union1d(a, b)`` for sorted arrays of distinct values: a stable sort of two sorted runs (a
+    merge) instead of a full sort of both."""
     return np.sort(np.concatenate([a, b[~in_sorted(b, a)]]), kind="stable")
 
 

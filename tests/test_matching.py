@@ -166,6 +166,18 @@ def test_a_piece_on_projector_rays_that_lit_something_else_does_not_continue_the
     assert _continue_along(*args, lit) == {}
 
 
+def _top_view_labels(cap):
+    """Our labels, the true stripes and the surface kinds (M,) of the centres of a capture's top view,
+    labelled with the simulator's true calibration."""
+    img = read_image(cap / "scan" / "top.png")
+    c = detect_centres(img)
+    c = c.take(denoise(c, img.shape))
+    truth, kind = match_crossings(np.column_stack([c.u, c.v]), dict(np.load(cap / "truth" / "top_stripes.npz")))
+    cal = load_calibration(cap / "truth" / "truth.json")
+    lab = label_centres(c, rays_at(c.u, c.v, ray_table(cal.intrinsics)), cal.planes, img.shape).stripe
+    return lab, truth, kind
+
+
 def test_a_top_view_in_a_bright_room_is_weighed_again_as_a_whole(tmp_path):
     """Seen from above in a bright room, the tail joins the labels only after the body was placed, and the
     body alone had a stripe of slack toward its conflicts (every label one low). Weighing the whole
@@ -174,12 +186,7 @@ def test_a_top_view_in_a_bright_room_is_weighed_again_as_a_whole(tmp_path):
 
     cap = write_capture(tmp_path / "cap", size=(1024, 683), poses=1, seed=2, scenes=("top",),
                         light={"ambient": 150.0})
-    img = read_image(cap / "scan" / "top.png")
-    c = detect_centres(img)
-    c = c.take(denoise(c, img.shape))
-    truth, kind = match_crossings(np.column_stack([c.u, c.v]), dict(np.load(cap / "truth" / "top_stripes.npz")))
-    cal = load_calibration(cap / "truth" / "truth.json")
-    lab = label_centres(c, rays_at(c.u, c.v, ray_table(cal.intrinsics)), cal.planes, img.shape).stripe
+    lab, truth, kind = _top_view_labels(cap)
     got = (kind == 5) & (lab >= 0)
     assert got.sum() > 0.8 * (kind == 5).sum()
     assert np.mean(lab[got] == truth[got]) > 0.99
@@ -239,12 +246,7 @@ def test_a_noisy_top_view_weighs_the_tail_fragments_too(tmp_path):
     # scene (with a board pose rendered first) still places this top view one stripe low
     cap = write_capture(tmp_path / "cap", size=(1536, 1024), poses=0, seed=9, scenes=("side", "top"),
                         light={"read_noise": 3.0, "gain": 1.2})
-    img = read_image(cap / "scan" / "top.png")
-    c = detect_centres(img)
-    c = c.take(denoise(c, img.shape))
-    truth, kind = match_crossings(np.column_stack([c.u, c.v]), dict(np.load(cap / "truth" / "top_stripes.npz")))
-    cal = load_calibration(cap / "truth" / "truth.json")
-    lab = label_centres(c, rays_at(c.u, c.v, ray_table(cal.intrinsics)), cal.planes, img.shape).stripe
+    lab, truth, kind = _top_view_labels(cap)
     got = (kind == 5) & (lab >= 0)
     assert got.sum() > 0.7 * (kind == 5).sum()
     assert np.mean(lab[got] == truth[got]) > 0.98
