@@ -267,11 +267,13 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
     best = offs[i]
     # the same run followed the other way: when it ends only because the piece would leave the pattern,
     # both ends are walls and the piece could sit anywhere between them (seen on an animal lit to the
-    # pattern's edge from above): two or more stripes of play is refused rather than guessed
+    # pattern's edge from above): two or more stripes of play is refused rather than guessed. The floor
+    # and wall bound the run too: where the piece would sink behind them, the run ends short of the edge
     side = 1 if projector_right else 0
     j = i
     flat = vals - floor < 0.25 * residue * step
-    while j + 1 < len(vals) and flat[j + 1] and beyond[offs[j + 1]][side] <= pattern_edge:
+    while (j + 1 < len(vals) and flat[j + 1] and beyond[offs[j + 1]][side] <= pattern_edge
+           and (behind is None or behind(offs[j + 1]) <= max_behind)):
         j += 1
     nxt = offs[j] + (1 if projector_right else -1)
     at_edge = j + 1 >= len(vals) or (flat[j + 1] and beyond[nxt][side] > pattern_edge)

@@ -97,6 +97,11 @@ def test_a_piece_with_play_between_its_conflicts_and_the_pattern_edge_is_refused
 
     assert choose_offset(*curve(21)) == 20
     assert choose_offset(*curve(24)) is None
+    # the floor bounds the run short of the edge: the piece sinks behind it from offset 22 on, so only one
+    # stripe of play is left (a cow seen from the side at 3072 px was refused without this)
+    assert choose_offset(*curve(24), behind=lambda off: 0.05 if off >= 22 else 0.0) == 20
+    # a bound that lies beyond the edge changes nothing
+    assert choose_offset(*curve(24), behind=lambda off: 0.05 if off >= 26 else 0.0) is None
 
 
 def test_a_small_piece_that_conflicts_wherever_it_goes_is_not_placed():
