@@ -249,41 +249,25 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     Also returns the per-centre labels (M,) of the background and the placed pieces, the projector cells
     they light (``lit_cells``) and the centres (K,) of the first piece placed (None if none was).
 
-    Each piece gets relative indices by depth continuity from a seed (the longest segment left) and is
-    placed from its conflict curve, with the pieces placed before it counting as lit; pieces under
-    ``SMALL_PIECE`` of the largest so far are returned for ``_place_small``, which runs after growth
-    from the placed pieces had its turn."""
+    Each piece (``_pieces``) is placed from its conflict curve, largest first, with the pieces placed
+    before it counting as lit: the largest carries the most shadow evidence, and the first piece placed
+    sets what every later one is read against (seeded from its longest segment, a leg seen from the side
+    at 3072 px could come first and be refused, and then the body was read without the leg's cells).
+    Pieces under ``SMALL_PIECE`` of the largest are returned for ``_place_small``, which runs after
+    growth from the placed pieces had its turn."""
     out: dict[int, int] = {}
-    labelled = np.zeros(seg.max() + 1, bool)
-    labelled[list(seg_label)] = True
-    remaining = long_seg & ~labelled[seg]
-    sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)  # centres left per segment
-    pool = pairs.of(remaining)  # of the centres left
     cl = _labels_of(seg, seg_label, long_seg)
     lit = bg_lit
     mid = n // 2
-    biggest = 0
     placed_max = 0  # centres in the largest piece placed so far
     small = []
     first = None
-    while sizes.sum() >= 50:
-        seed = int(np.argmax(sizes))
-        if sizes[seed] < 30:  # only specks and stubs are left: too short to seed a piece of the animal
-            break
-        trial = {seed: mid}
-        _grow_all(c, rays, planes, seg, trial, remaining, left, right, tol, n, None, depth_only=True, pairs=pool)
-        in_trial = np.zeros(seg.max() + 1, bool)
-        in_trial[np.fromiter(trial, np.int64)] = True
-        _refine(rays, planes, seg, trial, pool.take(in_trial[pool.own_seg]), tol, n)  # members stay
-        in_cluster = in_trial[seg] & remaining
-        remaining &= ~in_cluster
-        idx = np.nonzero(in_cluster)[0]
-        sizes -= np.bincount(seg[idx], minlength=len(sizes))
-        pool = pool.take(remaining[pool.idx])
-        biggest = max(biggest, len(idx))
-        if len(idx) < max(50, SMALL_PIECE * biggest):  # too little shadow evidence of its own
+    found = sorted(_pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pairs, mid),
+                   key=lambda piece: -len(piece[0]))
+    for idx, trial in found:
+        if len(idx) < max(50, SMALL_PIECE * len(found[0][0])):  # too little shadow evidence of its own
             if len(idx) >= 50:
-                small.append((idx, dict(trial)))
+                small.append((idx, trial))
             continue
         weighed[idx] = True
         rel = _relative(seg, trial, mid)
@@ -303,6 +287,35 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         first = idx if first is None else first
         placed_max = max(placed_max, len(idx))
     return out, small, cl, lit, first
+
+
+def _pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pairs: _Pairs, mid: int
+            ) -> list[tuple[np.ndarray, dict[int, int]]]:
+    """The pieces of the segments ``seg_label`` leaves unlabelled, in the order they were found: each
+    grown by depth continuity from a seed (the longest segment left), as its centres (K,) and its
+    segments' labels relative to the seed's ``mid``. Specks and stubs (under 30 centres) seed none."""
+    labelled = np.zeros(seg.max() + 1, bool)
+    labelled[list(seg_label)] = True
+    remaining = long_seg & ~labelled[seg]
+    sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)  # centres left per segment
+    pool = pairs.of(remaining)  # of the centres left
+    found = []
+    while sizes.sum() >= 50:
+        seed = int(np.argmax(sizes))
+        if sizes[seed] < 30:
+            break
+        trial = {seed: mid}
+        _grow_all(c, rays, planes, seg, trial, remaining, left, right, tol, n, None, depth_only=True, pairs=pool)
+        in_trial = np.zeros(seg.max() + 1, bool)
+        in_trial[np.fromiter(trial, np.int64)] = True
+        _refine(rays, planes, seg, trial, pool.take(in_trial[pool.own_seg]), tol, n)  # members stay
+        in_cluster = in_trial[seg] & remaining
+        remaining &= ~in_cluster
+        idx = np.nonzero(in_cluster)[0]
+        sizes -= np.bincount(seg[idx], minlength=len(sizes))
+        pool = pool.take(remaining[pool.idx])
+        found.append((idx, trial))
+    return found
 
 
 def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask, fg_pairs, long_seg, left, right, tol, n,

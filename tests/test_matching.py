@@ -250,3 +250,28 @@ def test_a_noisy_top_view_weighs_the_tail_fragments_too(tmp_path):
     got = (kind == 5) & (lab >= 0)
     assert got.sum() > 0.7 * (kind == 5).sum()
     assert np.mean(lab[got] == truth[got]) > 0.98
+
+
+def test_pieces_are_weighed_largest_first(monkeypatch):
+    """The first piece placed sets what every later one is read against, so the piece with the most
+    shadow evidence goes first, whichever seed was found first (from the side at 3072 px a leg's stripe can
+    be the longest segment)."""
+    import measurement.matching as m
+
+    seg = np.arange(500) // 50  # ten segments of 50 centres
+    leg = (np.arange(0, 100), {0: 20, 1: 20})
+    body = (np.arange(100, 500), {s: 20 + s for s in range(2, 10)})
+    monkeypatch.setattr(m, "_pieces", lambda *args: [leg, body])
+    monkeypatch.setattr(m, "projector_right", lambda planes: True)
+    weighed_sizes = []
+
+    def offset(rays, planes, cl, r, idx, n, right, **kw):
+        weighed_sizes.append(len(idx))
+        return None
+
+    monkeypatch.setattr(m, "occlusion_offset", offset)
+    weighed = np.zeros(500, bool)
+    m._foreground(None, None, None, seg, {}, np.ones(500, bool), None, None, 10.0, 40, None, weighed,
+                  (400.0, 3500.0), None, np.zeros(0, np.int64), None)
+    assert weighed_sizes == [400, 100]
+    assert weighed.all()
