@@ -253,14 +253,22 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
     # Its step (the mean of the three steepest of the twelve steps below the minimum) sets the scale: a
     # residue under half a step is stray centres at the outline, not the piece's edge column
     i = int(np.argmin(vals))
-    floor = float(vals[i])
-    steps = np.sort(-np.diff(vals[max(0, i - ramp_steps):i + 1]))[-3:]
-    step = float(steps.mean()) if len(steps) else 0.0
+    step = _ramp_step(vals, i, ramp_steps)
+    possible = np.ones(len(vals), bool)
+    if step <= 0.005:
+        # the minimum can sit where a share of the piece would lie past the pattern (those cells are not
+        # counted): read the curve among the offsets the pattern allows (a side view without a wall at
+        # 3072 px, whose body's minimum lay where 15 % of it fell before the first stripe)
+        possible = np.array([max(beyond[o]) <= pattern_edge for o in offs])
+        if possible.any():
+            i = int(np.argmin(np.where(possible, vals, np.inf)))
+            step = _ramp_step(vals, i, ramp_steps)
     if step <= 0.005:  # no ramp: nothing bounds the piece on the lit side
         return None
+    floor = float(vals[i])
     # the first tolerated offset coming up the ramp: with a noisy sensor the flat side is bumpy, and a
     # bump over the tolerance between the ramp's foot and the minimum must not hold the reading there
-    tolerated = vals - floor < residue * step
+    tolerated = (vals - floor < residue * step) & possible
     i = int(np.argmax(tolerated))
     if i == 0:
         return None
@@ -291,6 +299,13 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
     while behind is not None and best + toward in conflicts and behind(best) > max_behind:
         best += toward
     return int(best)
+
+
+def _ramp_step(vals: np.ndarray, i: int, ramp_steps: int) -> float:
+    """The mean of the three steepest of the ``ramp_steps`` steps of the curve ``vals`` below its
+    minimum at ``i`` (0 without any)."""
+    steps = np.sort(-np.diff(vals[max(0, i - ramp_steps):i + 1]))[-3:]
+    return float(steps.mean()) if len(steps) else 0.0
 
 
 def sharp_minimum(conflicts: dict[int, float], beyond: dict[int, tuple[float, float]],

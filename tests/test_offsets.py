@@ -155,3 +155,17 @@ def test_a_bump_on_the_flat_side_does_not_hold_the_reading_away_from_the_ramp():
     assert choose_offset(conflicts, beyond, projector_right=True) == 27
     mirrored = {40 - o: v for o, v in conflicts.items()}
     assert choose_offset(mirrored, {o: (0.0, 0.0) for o in mirrored}, projector_right=False) == 13
+
+
+def test_a_minimum_that_pushes_the_piece_past_the_pattern_is_not_the_reading():
+    """Below offset 20 a share of the piece falls before the first stripe and its cells there are not
+    counted, so the curve reads nothing at offsets 13-19 and no ramp lies below that minimum. Among the
+    offsets the pattern allows the curve has its ramp (conflicts falling to 27), and that is read; one
+    stripe deeper the piece sinks behind the floor (a side view without a wall at 3072 px)."""
+    from measurement.offsets import choose_offset
+
+    conflicts = {o: 0.0 for o in range(13, 20)}
+    conflicts.update({20: 0.06, 21: 0.055, 22: 0.05, 23: 0.045, 24: 0.04, 25: 0.03, 26: 0.015, 27: 0.0,
+                      28: 0.0, 29: 0.0, 30: 0.0})
+    beyond = {o: ((20 - o) * 0.03 if o < 20 else 0.0, 0.0) for o in conflicts}
+    assert choose_offset(conflicts, beyond, behind=lambda off: 0.01 if off >= 28 else 0.0) == 27
