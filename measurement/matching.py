@@ -51,7 +51,7 @@ from .segments import (
     smooth_along_segments,
     split_at_changes,
 )
-from .triangulation import depth_for_labels, depth_on, intersect
+from .triangulation import depth_in_range, depth_on, intersect
 
 __all__ = ["Labels", "MatchingParams", "denoise", "label_centres", "link_segments", "smooth_along_segments"]
 GAP_PENALTY_MM = 8.0
@@ -195,18 +195,17 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     # 3: the background grows over its own surfaces; a segment joins it only if it then lies on them
     pairs = _neighbour_pairs(seg, long_seg, left, right)  # every growth below takes its centres' share
     _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, 1.7 * spacing_mm, n, bg_planes, pairs=pairs)
-    z_all = depth_for_labels(rays, planes)  # (M, N): every centre on every light plane, computed once
     # 3b: unlabelled pieces of floor or wall (between the legs, beside the outline) are claimed by the
     # one label that puts them on a background plane
     if bg_planes is not None:
-        seg_label.update(claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, depth=z_all))
+        seg_label.update(claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n))
     # 4: foreground clusters: relative labels by growing from a seed, offset from the shadow they cast
     weighed = np.zeros(m, bool)
     bg_labels = dict(seg_label)
     bg_cl = _labels_of(seg, seg_label, long_seg)
     bg_lit = lit_cells(rays, planes, bg_cl, np.flatnonzero(bg_cl >= 0))
     fg_labels, small, cl, lit, first = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol,
-                                                   n, z_all, weighed, params.depth_range_mm, bg_planes, bg_lit,
+                                                   n, weighed, params.depth_range_mm, bg_planes, bg_lit,
                                                    pairs)
     if fg_labels:
         # pieces of the animal without shadow evidence of their own continue a labelled piece's surface
@@ -214,7 +213,7 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
         is_bg[list(seg_label)] = True
         fg_mask = long_seg & ~is_bg[seg]
         if bg_planes is not None:  # leave alone what some index would put on the floor or wall
-            fg_mask &= ~background_like(rays, planes, seg, fg_mask, bg_planes, set(fg_labels), depth=z_all)
+            fg_mask &= ~background_like(rays, planes, seg, fg_mask, bg_planes, set(fg_labels))
         fg_pairs = pairs.of(fg_mask)
         _grow_all(c, rays, planes, seg, fg_labels, fg_mask, left, right, tol, n, None, depth_only=True,
                   gaps=(1,), min_share=0.8, slope=True, pairs=fg_pairs)
@@ -234,14 +233,13 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
                 _TRACE.append((None, None, shift))
     labels = _labels_of(seg, seg_label, long_seg)
     ok = labels >= 0
-    zmin, zmax = params.depth_range_mm
-    z = np.where(ok, z_all[np.arange(m), np.clip(labels, 0, n - 1)], np.nan)
-    labels[ok & ~((z > zmin) & (z < zmax))] = -1
+    at = np.flatnonzero(ok)
+    labels[at[~depth_in_range(rays.take(at, axis=0), planes, labels[at], *params.depth_range_mm)]] = -1
     labels = _enforce_row_order(c, labels)
     return Labels(labels, bg_planes, seg, int(weighed.sum()), int((weighed & (labels < 0)).sum()))
 
 
-def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, weighed, zrange,
+def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, weighed, zrange,
                 bg_planes, bg_lit, pairs: _Pairs) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None]:
     """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
     (M,) the centres of every piece that was weighed for an offset. ``bg_lit`` : the projector cells lit
@@ -295,8 +293,8 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
             continue
         lab = rel[seg[idx]] + off
         inside = (lab >= 0) & (lab < n)
-        z = z_all[idx[inside], lab[inside]]
-        if inside.mean() < 0.8 or np.mean((z > zrange[0]) & (z < zrange[1])) < 0.9:
+        if inside.mean() < 0.8 or np.mean(depth_in_range(rays.take(idx[inside], axis=0), planes, lab[inside],
+                                                         *zrange)) < 0.9:
             continue
         out.update(_placed(trial, rel, off, n))
         lit = _claim(rays, planes, cl, lit, idx, lab)
