@@ -59,6 +59,66 @@ def elevation_bins(points: np.ndarray, planes: np.ndarray, bins: float) -> np.nd
     return np.floor(e, out=e).astype(np.int64)
 
 
+def _bins_on_planes(rays: np.ndarray, planes: np.ndarray, bins: float, chunk: int = 2048) -> np.ndarray:
+    """``elevation_bins`` (N, S) of the point of each ray (S, 3) on every light plane (N, 4), as
+    ``elevation_bins(intersect(...))`` gives them ray by ray; ``chunk`` rays at a time, in cache."""
+    out = np.empty((len(planes), len(rays)), np.int64)
+    for a in range(0, len(rays), chunk):
+        out[:, a:a + chunk] = _bins_on_planes_chunk(rays[a:a + chunk], planes, bins)
+    return out
+
+
+def _bins_on_planes_chunk(rays: np.ndarray, planes: np.ndarray, bins: float, margin: float = 1e-5
+                          ) -> np.ndarray:
+    """``_bins_on_planes`` without (N, S, 3) points: with s the ray's scale on the plane, the point's
+    offset from the projector centre c is s r - c, the elevation's numerator s (r . a) - c . a and its
+    squared distance from the axis |s r - c|^2 minus that squared. This rounds differently; where that
+    could matter (within ``margin`` of a bin's edge, a ray nearly parallel to its plane, a point near
+    the axis) the exact formula decides."""
+    centre, a = _projector_frame(planes)
+    r = np.ascontiguousarray(rays.T)  # (3, S): each plane's row is one long loop over the rays
+    dot = planes[:, :1] * r[0]
+    dot += planes[:, 1:2] * r[1]
+    dot += planes[:, 2:3] * r[2]
+    size = np.abs(dot)
+    # on well-conditioned points (ray . normal at least 1e-3 of the sum of its terms' sizes, the distance
+    # from the axis at least 1e-2 of |s r - c| + |c|) the two differ by under 1e-6 (64 ulp times condition
+    # numbers up to 1e3 and 300); on 1.9 M points of the bench views by at most 1.1e-16
+    sure = size > 1e-3 * np.abs(r).sum(axis=0)
+    sure &= size > 1e-6
+    s = np.divide(planes[:, 3:], dot, out=size)
+    along = s * (a @ r)
+    along -= centre @ a
+    q2 = s * (r * r).sum(axis=0)
+    q2 -= 2 * (centre @ r)
+    q2 *= s
+    q2 += centre @ centre  # |s r - c|^2
+    across2 = np.multiply(along, along, out=dot)
+    np.subtract(q2, across2, out=across2)
+    q2 += centre @ centre
+    sure &= across2 > 1e-4 * q2
+    f = np.sqrt(across2, out=across2)
+    f *= bins
+    f = np.divide(along, f, out=f)
+    out = np.floor(f)
+    f -= out
+    tau = margin / bins
+    sure &= (f > tau) & (f < 1 - tau)
+    out = out.astype(np.int64)
+    k, i = np.divmod(np.flatnonzero(~sure), len(rays))
+    if len(i):
+        out[k, i] = _exact_bins(rays.take(i, axis=0), planes.take(k, axis=0), planes, bins)
+    return out
+
+
+def _exact_bins(rays: np.ndarray, on: np.ndarray, planes: np.ndarray, bins: float) -> np.ndarray:
+    """``elevation_bins`` (K,) of rays (K, 3) on their planes ``on`` (K, 4), each as in a larger call (a
+    single ray would take another BLAS path in ``_elevation``)."""
+    if len(rays) == 1:
+        return _exact_bins(np.repeat(rays, 2, axis=0), np.repeat(on, 2, axis=0), planes, bins)[:1]
+    return elevation_bins(intersect(rays, on, out=rays), planes, bins)
+
+
 def _elevation(q: np.ndarray, a: np.ndarray) -> np.ndarray:
     """Elevation (K,) of points q (K, 3) relative to the projector centre about the unit axis a (3,)."""
     along = q @ a
@@ -199,10 +259,8 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
     flat = np.flatnonzero((k >= 0) & (k < n))
     at, i = np.divmod(flat, len(sub))
     k = k.ravel().take(flat)
-    # every offset's points at once (row by row the numbers of one offset at a time)
-    ray = rays.take(sub, axis=0).take(i, axis=0)
-    p = intersect(ray, planes.take(k, axis=0), out=ray)
-    e = elevation_bins(p, planes, bins)
+    # every offset's bins at once, read off those of every thinned centre on every plane
+    e = _bins_on_planes(rays.take(sub, axis=0), planes, bins).ravel().take(k * len(sub) + i)
     cells, hits = _distinct_cells(at, k, e, len(rows), n, deep)
     conflicts = {int(offs[j]): float(hits[w] / cells[w]) for w, j in enumerate(rows)}
     if not conflicts:
