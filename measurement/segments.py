@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from scipy.sparse import coo_matrix
+from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from .detection import Centres
@@ -48,7 +48,7 @@ def link_segments(c: Centres, link_px: float) -> np.ndarray:
         src.append(a[mutual])
         dst.append(b[mutual])
     s, d = np.concatenate(src), np.concatenate(dst)
-    graph = coo_matrix((np.ones(len(s)), (s, d)), shape=(m, m))
+    graph = csr_matrix((np.ones(len(s)), (s, d)), shape=(m, m))  # CSR: connected_components converts COO first
     _, comp = connected_components(graph, directed=False)
     seg = np.empty(m, np.int64)
     seg[order] = comp
