@@ -33,6 +33,7 @@ from .background import (
 )
 from .detection import Centres, reliable
 from .offsets import (
+    BinTable,
     behind_background,
     conflict_curve,
     elevation_bins,
@@ -204,9 +205,10 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     bg_labels = dict(seg_label)
     bg_cl = _labels_of(seg, seg_label, long_seg)
     bg_lit = lit_cells(rays, planes, bg_cl, np.flatnonzero(bg_cl >= 0))
+    table = BinTable(rays, planes)  # the pieces' elevation bins, shared by every conflict curve below
     fg_labels, small, cl, lit, first = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol,
                                                    n, weighed, params.depth_range_mm, bg_planes, bg_lit,
-                                                   pairs)
+                                                   pairs, table)
     if fg_labels:
         # pieces of the animal without shadow evidence of their own continue a labelled piece's surface
         is_bg = np.zeros(seg.max() + 1, bool)
@@ -222,11 +224,11 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
         seg_label.update(_continue_along(c, rays, planes, seg, seg_label, fg_mask, set(fg_labels), link,
                                          0.25 * spacing_mm, lit))
     if fg_labels and small:  # isolated small pieces (a head seen from above) hemmed in by what is placed
-        seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit))
+        seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit, table))
     if fg_labels and first is not None:  # the whole animal weighed again, with what joined after the first piece
         fg = {s: k for s, k in seg_label.items() if s not in bg_labels}
         shift = _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg, fg_mask, fg_pairs, long_seg, left,
-                                    right, tol, n, bg_planes, first)
+                                    right, tol, n, bg_planes, first, table)
         if shift:
             seg_label = {**bg_labels, **{s: k + shift for s, k in fg.items() if 0 <= k + shift < n}}
             if _TRACE is not None:  # (no centres, no relative labels, the shift of every animal label)
@@ -240,10 +242,12 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
 
 
 def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, weighed, zrange,
-                bg_planes, bg_lit, pairs: _Pairs) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None]:
+                bg_planes, bg_lit, pairs: _Pairs, table: BinTable
+                ) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None]:
     """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
     (M,) the centres of every piece that was weighed for an offset. ``bg_lit`` : the projector cells lit
-    at the labels of ``seg_label`` (``lit_cells``); ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``.
+    at the labels of ``seg_label`` (``lit_cells``); ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``;
+    ``table`` : the ``BinTable`` the conflict curves share.
     Also returns the per-centre labels (M,) of the background and the placed pieces, the projector cells
     they light (``lit_cells``) and the centres (K,) of the first piece placed (None if none was).
 
@@ -286,7 +290,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         weighed[idx] = True
         rel = _relative(seg, trial, mid)
         off = occlusion_offset(rays, planes, cl, rel[seg], idx, n, projector_right(planes), background=bg_planes,
-                               beside_placed=len(idx) < placed_max, lit=lit)
+                               beside_placed=len(idx) < placed_max, lit=lit, table=table)
         if _TRACE is not None:
             _TRACE.append((idx, rel[seg[idx]], off))
         if off is None:
@@ -304,10 +308,12 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
 
 
 def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask, fg_pairs, long_seg, left, right, tol, n,
-                        bg_planes, first, max_behind: float = 0.001, evidence_share: float = 0.6) -> int:
+                        bg_planes, first, table: BinTable, max_behind: float = 0.001, evidence_share: float = 0.6
+                        ) -> int:
     """Stripes (0 or a shift away from the conflicts) by which to move every animal label in ``fg_labels``
     (segment -> label), from the conflict curve of all of them together against the background's labels
-    ``bg_cl`` (M,) and the cells they light ``bg_lit``; ``fg_pairs`` : the ``_neighbour_pairs`` of ``fg_mask``.
+    ``bg_cl`` (M,) and the cells they light ``bg_lit``; ``fg_pairs`` : the ``_neighbour_pairs`` of ``fg_mask``;
+    ``table`` : the ``BinTable`` the conflict curves share.
 
     The first piece's offset was read from its own outline; an extremity on the lit side that joined only
     later (a tail seen from above, linked again only after growth, continuation or a small piece) leaves
@@ -327,7 +333,7 @@ def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask,
         return 0
     r = np.maximum(r, 0)  # occlusion_offset and behind_background read only the animal's centres
     right_side = projector_right(planes)
-    shift = occlusion_offset(rays, planes, bg_cl, r, idx, n, right_side, lit=bg_lit)
+    shift = occlusion_offset(rays, planes, bg_cl, r, idx, n, right_side, lit=bg_lit, table=table)
     if not shift or (shift > 0) != right_side:
         return 0
     if bg_planes is not None and behind_background(rays, planes, r, first, n, bg_planes, shift) > max_behind:
@@ -408,11 +414,12 @@ def _lit_share(rays, planes, seg, sid, k, lit) -> float:
     return float((in_sorted(cells, lit) & in_sorted(cells - 1, lit) & in_sorted(cells + 1, lit)).mean())
 
 
-def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, known, lit) -> dict[int, int]:
+def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, known, lit, table: BinTable
+                 ) -> dict[int, int]:
     """Labels for the small pieces that growth from their neighbours did not reach: each is placed only
     where the background and the pieces already labelled hem it in on both sides (the bottom of a V in
     its conflict curve); the others stay unlabelled. ``known`` (M,) labels (a subset of ``seg_label``'s)
-    whose cells ``lit`` holds."""
+    whose cells ``lit`` holds; ``table`` : the ``BinTable`` the conflict curves share."""
     out: dict[int, int] = {}
     cl = _labels_of(seg, seg_label, long_seg)
     # labels only join seg_label, never change: the centres labelled since add their cells
@@ -423,7 +430,7 @@ def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, know
             continue
         weighed[idx] = True
         rel = _relative(seg, trial, mid)
-        curve = conflict_curve(rays, planes, cl, rel[seg], idx, n, lit=lit)
+        curve = conflict_curve(rays, planes, cl, rel[seg], idx, n, lit=lit, table=table)
         # a small piece has few cells to conflict with: a bottom with conflicts is a piece mislinked
         off = sharp_minimum(*curve, max_floor=SMALL_FLOOR) if curve is not None else None
         if _TRACE is not None:

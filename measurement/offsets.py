@@ -59,18 +59,36 @@ def elevation_bins(points: np.ndarray, planes: np.ndarray, bins: float) -> np.nd
     return np.floor(e, out=e).astype(np.int64)
 
 
+class BinTable:
+    """``elevation_bins`` of centres on every light plane, each centre's computed when first asked for and
+    kept: a scan weighs the first piece's centres again with the whole animal."""
+
+    def __init__(self, rays: np.ndarray, planes: np.ndarray, bins: float = 0.002) -> None:
+        self.rays, self.planes, self.bins = rays, planes, bins
+        self._rows = np.empty((len(rays), len(planes)), np.int64)  # only the rows written are ever touched
+        self._known = np.zeros(len(rays), bool)
+
+    def rows(self, idx: np.ndarray) -> np.ndarray:
+        """(K, N) bins of the distinct centres ``idx`` (K,) on every plane."""
+        new = idx[~self._known[idx]]
+        if len(new):
+            self._rows[new] = _bins_on_planes(self.rays.take(new, axis=0), self.planes, self.bins)
+            self._known[new] = True
+        return self._rows.take(idx, axis=0)
+
+
 def _bins_on_planes(rays: np.ndarray, planes: np.ndarray, bins: float, chunk: int = 2048) -> np.ndarray:
-    """``elevation_bins`` (N, S) of the point of each ray (S, 3) on every light plane (N, 4), as
+    """``elevation_bins`` (S, N) of the point of each ray (S, 3) on every light plane (N, 4), as
     ``elevation_bins(intersect(...))`` gives them ray by ray; ``chunk`` rays at a time, in cache."""
-    out = np.empty((len(planes), len(rays)), np.int64)
+    out = np.empty((len(rays), len(planes)), np.int64)
     for a in range(0, len(rays), chunk):
-        out[:, a:a + chunk] = _bins_on_planes_chunk(rays[a:a + chunk], planes, bins)
+        out[a:a + chunk] = _bins_on_planes_chunk(rays[a:a + chunk], planes, bins).T
     return out
 
 
 def _bins_on_planes_chunk(rays: np.ndarray, planes: np.ndarray, bins: float, margin: float = 1e-5
                           ) -> np.ndarray:
-    """``_bins_on_planes`` without (N, S, 3) points: with s the ray's scale on the plane, the point's
+    """``_bins_on_planes`` transposed, (N, S), without (N, S, 3) points: with s the ray's scale on the plane, the point's
     offset from the projector centre c is s r - c, the elevation's numerator s (r . a) - c . a and its
     squared distance from the axis |s r - c|^2 minus that squared. This rounds differently; where that
     could matter (within ``margin`` of a bin's edge, a ray nearly parallel to its plane, a point near
@@ -158,7 +176,8 @@ def _thinned(idx: np.ndarray, most: int = 20000) -> np.ndarray:
 
 def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, bins: float = 0.002,
                       residue: float = 0.5, pattern_edge: float = 0.02, beside_placed: bool = False,
-                      lit: np.ndarray | None = None, background: np.ndarray | None = None) -> int | None:
+                      lit: np.ndarray | None = None, background: np.ndarray | None = None,
+                      table: BinTable | None = None) -> int | None:
     """Absolute offset of a cluster with relative labels ``r[idx]``, from the projector's point of view.
 
     A background point lit by stripe k at projector elevation e proves that nothing stood in front of it
@@ -181,7 +200,7 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
     away from its conflicts moves it deeper, and its feet then sink through the floor; the ramp reading
     never stops at such an offset.
     """
-    curve = conflict_curve(rays, planes, cl, r, idx, n, bins, lit)
+    curve = conflict_curve(rays, planes, cl, r, idx, n, bins, lit, table)
     if curve is None:
         return None
     # only for the first piece: a later one (a far leg, a tail) carries more stray centres with a wrong
@@ -233,11 +252,12 @@ def _unique_cells(stripe: np.ndarray, e: np.ndarray, n: int) -> np.ndarray:
     return k * 1_000_000 + (b + lo)
 
 
-def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.ndarray | None = None
-                   ) -> tuple[dict[int, float], dict[int, tuple[float, float]]] | None:
+def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.ndarray | None = None,
+                   table: BinTable | None = None) -> tuple[dict[int, float], dict[int, tuple[float, float]]] | None:
     """Per offset: the share of the piece's cells that land on deep-lit cells, and the shares of the
     piece pushed before the first and past the last stripe; None without enough lit background.
-    ``lit`` : the cells lit at every labelled centre of ``cl`` (``lit_cells``), if already known."""
+    ``lit`` : the cells lit at every labelled centre of ``cl`` (``lit_cells``), if already known;
+    ``table`` : a ``BinTable`` of these rays and planes at these ``bins``, to share with other curves."""
     bg = np.nonzero(cl >= 0)[0]
     if len(bg) < 100:
         return None
@@ -260,7 +280,8 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
     at, i = np.divmod(flat, len(sub))
     k = k.ravel().take(flat)
     # every offset's bins at once, read off those of every thinned centre on every plane
-    e = _bins_on_planes(rays.take(sub, axis=0), planes, bins).ravel().take(k * len(sub) + i)
+    table = table if table is not None else BinTable(rays, planes, bins)
+    e = table.rows(sub).ravel().take(i * len(planes) + k)
     cells, hits = _distinct_cells(at, k, e, len(rows), n, deep)
     conflicts = {int(offs[j]): float(hits[w] / cells[w]) for w, j in enumerate(rows)}
     if not conflicts:
