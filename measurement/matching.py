@@ -79,18 +79,19 @@ class MatchingParams:
     denoise: bool = True
 
 
-def main_row_labels(c: Centres, n: int) -> np.ndarray:
+def main_row_labels(c: Centres, n: int, order: np.ndarray | None = None) -> np.ndarray:
     """Labels (M,) from rows that show all n stripes, -1 elsewhere: rows holding exactly n evenly spread
     centres, and rows missing up to n // 8 of them where each missing stripe leaves one gap of twice the
     local spacing (a noisy sensor loses the dim stripes of a floor seen at a grazing angle, and then no
-    floor row holds all n)."""
+    floor row holds all n). order : row_order(c), if known"""
     labels = np.full(len(c), -1, np.int64)
     counts = np.bincount(c.v, minlength=int(c.v.max(initial=0)) + 1)
-    full = counts[c.v] == n
-    idx = np.nonzero(full)[0]
-    if len(idx) == 0:
+    # the rows of a given count in row order: the frame's row order restricted to them (a stable sort)
+    every = row_order(c) if order is None else order
+    row_count = counts[c.v[every]]
+    order = every[row_count == n]
+    if len(order) == 0:
         return labels
-    order = idx[row_order(c.take(idx))]
     grid = c.u[order].reshape(-1, n)
     gaps = np.diff(grid, axis=1)
     # spacing changes slowly along a row on a smooth surface: no gap may jump against its neighbours
@@ -99,19 +100,18 @@ def main_row_labels(c: Centres, n: int) -> np.ndarray:
     rows_ok = np.repeat(regular, n)
     labels[order[rows_ok]] = np.tile(np.arange(n), regular.sum())
     for m in range(n - n // 8, n):
-        _gapped_rows(c, counts, m, n, labels)
+        _gapped_rows(c, every[row_count == m], m, n, labels)
     return labels
 
 
-def _gapped_rows(c: Centres, counts: np.ndarray, m: int, n: int, labels: np.ndarray, window: int = 7,
+def _gapped_rows(c: Centres, order: np.ndarray, m: int, n: int, labels: np.ndarray, window: int = 7,
                  slack: float = 0.2) -> None:
-    """Write into ``labels`` (M,) the labels of the rows holding m < n centres whose gaps are each one
-    or two local spacings (the median gap of the ``window`` around it), within ``slack``, adding up to
-    n - 1 spacings, and whose spacing per stripe changes smoothly along the row."""
-    idx = np.nonzero(counts[c.v] == m)[0]
-    if len(idx) == 0 or m < window + 1:
+    """Write into ``labels`` (M,) the labels of the rows holding m < n centres (``order``: theirs, in
+    row order) whose gaps are each one or two local spacings (the median gap of the ``window`` around
+    it), within ``slack``, adding up to n - 1 spacings, and whose spacing per stripe changes smoothly
+    along the row."""
+    if len(order) == 0 or m < window + 1:
         return
-    order = idx[row_order(c.take(idx))]
     gaps = np.diff(c.u[order].reshape(-1, m), axis=1)  # (R, m - 1) pixels
     pad = window // 2
     windows = np.lib.stride_tricks.sliding_window_view(np.pad(gaps, ((0, 0), (pad, pad)), mode="edge"), window,
@@ -179,11 +179,12 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     if m == 0:
         return Labels(np.zeros(0, np.int64), None)
     link = params.link_px * max(shape[1] / 3072.0, 0.5)
-    seg = split_at_changes(c, link_segments(c, link))
+    order = row_order(c)
+    seg = split_at_changes(c, link_segments(c, link, order))
     long_seg = np.bincount(seg)[seg] >= params.min_segment_rows
-    left, right = row_neighbours(c)
+    left, right = row_neighbours(c, order)
     # 1: the background (floor, wall) from complete rows
-    seg_label = _segment_vote(seg, np.where(long_seg, main_row_labels(c, n), -1))
+    seg_label = _segment_vote(seg, np.where(long_seg, main_row_labels(c, n, order), -1))
     labels = _labels_of(seg, seg_label, long_seg)
     # 2: a stripe that continued across the animal's outline in the image carried a background index
     # onto the animal; such centres sit off the background surfaces: cut them off as foreground
@@ -237,7 +238,7 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     ok = labels >= 0
     at = np.flatnonzero(ok)
     labels[at[~depth_in_range(rays.take(at, axis=0), planes, labels[at], *params.depth_range_mm)]] = -1
-    labels = _enforce_row_order(c, labels)
+    labels = _enforce_row_order(c, labels, order)
     return Labels(labels, bg_planes, seg, int(weighed.sum()), int((weighed & (labels < 0)).sum()))
 
 
@@ -752,11 +753,10 @@ def _refine(rays, planes, seg, seg_label, pairs: _Pairs, tol_mm, n, rounds: int 
         table[np.fromiter(changed.keys(), np.int64)] = np.fromiter(changed.values(), np.int64)
 
 
-def _enforce_row_order(c: Centres, labels: np.ndarray) -> np.ndarray:
+def _enforce_row_order(c: Centres, labels: np.ndarray, order: np.ndarray) -> np.ndarray:
     """Within a row, labels must increase left to right; drop the centres that break the order (the
     minority of a longest increasing run would be better; dropping both sides of each inversion is
-    simpler and loses few centres)."""
-    order = row_order(c)
+    simpler and loses few centres). order : row_order(c)"""
     lab = labels[order]
     v = c.v[order]
     valid = lab >= 0
