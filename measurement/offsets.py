@@ -276,12 +276,17 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
     weighed = (len(rs) - lo - hi) / len(rs) >= 0.8
     rows = np.flatnonzero(weighed)
     k = r[sub][None, :] + offs[rows, None]  # (W, S) the stripe of each centre at each weighed offset
-    flat = np.flatnonzero((k >= 0) & (k < n))
-    at, i = np.divmod(flat, len(sub))
+    inside = (k >= 0) & (k < n)
+    flat = np.flatnonzero(inside)
+    at = np.repeat(np.arange(len(rows)), np.count_nonzero(inside, axis=1))  # flat // S without a division
     k = k.ravel().take(flat)
-    # every offset's bins at once, read off those of every thinned centre on every plane
+    # every offset's bins at once, read off those of every thinned centre on every plane: the bin of
+    # centre i = flat - at S on plane k sits at i N + k of the table
     table = table if table is not None else BinTable(rays, planes, bins)
-    e = table.rows(sub).ravel().take(i * len(planes) + k)
+    pos = flat - at * len(sub)
+    pos *= len(planes)
+    pos += k
+    e = table.rows(sub).ravel().take(pos)
     cells, hits = _distinct_cells(at, k, e, len(rows), n, deep)
     conflicts = {int(offs[j]): float(hits[w] / cells[w]) for w, j in enumerate(rows)}
     if not conflicts:
@@ -299,7 +304,10 @@ def _distinct_cells(group: np.ndarray, stripe: np.ndarray, e: np.ndarray, groups
     bins = hi - lo + 1
     if lo > -400_000 and hi < 400_000 and groups * n * bins <= 20_000_000:  # a bitmap, no sort
         mark = np.zeros((groups, n * bins), bool)
-        mark[group, stripe * bins + (e - lo)] = True
+        cell = stripe * bins  # the flat position in the bitmap: cheaper than a 2-D index
+        cell += e
+        cell += group * (n * bins) - lo
+        mark.ravel()[cell] = True
         dk = (deep + 500_000) // 1_000_000  # keys of bins within +-5e5 split back into stripe and bin
         de = deep - dk * 1_000_000 - lo
         use = (dk >= 0) & (dk < n) & (de >= 0) & (de < bins)
