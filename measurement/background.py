@@ -43,18 +43,17 @@ def near_planes(points: np.ndarray, bg_planes: np.ndarray, tol_mm: float = 8.0) 
 
 
 def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray, tol_mm: float,
-                    depth: np.ndarray | None = None, chunk: int = 4096) -> np.ndarray:
+                    chunk: int = 4096) -> np.ndarray:
     """(m, N) True where ray i's point on light plane k lies within ``tol_mm`` of a background plane.
-    depth : (m, N) depth_for_labels(rays, planes) when already known
 
     The distance is |(ray z) . n - d|. It is screened as |z (ray . n) - d| (no (m, N, 3) points), which
     differs only by rounding; where that lies within a hair of ``tol_mm`` the points are formed after
     all, so the answer is the one the exact formula gives."""
-    z_all = depth_for_labels(rays, planes) if depth is None else depth
     normals = np.ascontiguousarray(bg_planes[:, :3].T)  # (3, P)
     out = np.empty((len(rays), len(planes)), bool)
     for a in range(0, len(rays), chunk):
-        r, z = rays[a:a + chunk], z_all[a:a + chunk]
+        r = rays[a:a + chunk]
+        z = depth_for_labels(r, planes)  # chunk by chunk: (chunk, N) stays in cache
         along = r @ normals  # (m, P)
         d = _plane_gap(z, along[:, :1], bg_planes[0, 3])
         for p in range(1, len(bg_planes)):  # fmin skips NaN (ray parallel to a plane) like the exact min
@@ -85,49 +84,45 @@ def _near_exact(points: np.ndarray, normals: np.ndarray, d: np.ndarray, tol_mm: 
     return np.nan_to_num(dist, nan=np.inf).min(axis=1) < tol_mm
 
 
-def _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm, depth=None):
+def _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm):
     """Per segment in ``sids`` (S,) and light plane (N,): the share of its centres whose point on that
     plane lies within ``tol_mm`` of a background plane, (S, N); and the
-    centres (K,) grouped by segment in the order of ``sids``, with their group starts (S + 1,).
-    depth : (M, N) depth_for_labels(rays, planes) of all centres when already known"""
+    centres (K,) grouped by segment in the order of ``sids``, with their group starts (S + 1,)."""
     member = np.zeros(seg.max() + 1, bool)
     member[sids] = True
     idx = np.nonzero(member[seg])[0]
     idx = idx[np.argsort(seg[idx], kind="stable")]
     starts = np.searchsorted(seg[idx], sids)
-    near = _near_any_plane(rays.take(idx, axis=0), planes, bg_planes, tol_mm,
-                           None if depth is None else depth.take(idx, axis=0))
+    near = _near_any_plane(rays.take(idx, axis=0), planes, bg_planes, tol_mm)
     counts = np.add.reduceat(near, starts, axis=0, dtype=np.int64) if len(sids) else near[:0]
     sizes = np.diff(np.r_[starts, len(idx)])
     return counts / sizes[:, None], idx, np.r_[starts, len(idx)]
 
 
 def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, min_rows: int = 15,
-                      share: float = 0.95, tol_mm: float = 5.0, depth=None) -> dict[int, int]:
+                      share: float = 0.95, tol_mm: float = 5.0) -> dict[int, int]:
     """Unlabelled segments that exactly one stripe index puts on a background plane (>= ``share`` of
-    their points within ``tol_mm``); animal stripes are curved and fit no single plane that way.
-    depth : (M, N) depth_for_labels(rays, planes) when already known"""
+    their points within ``tol_mm``); animal stripes are curved and fit no single plane that way."""
     labelled = np.zeros(seg.max() + 1, bool)
     labelled[list(seg_label)] = True
     cand = long_seg & ~labelled[seg]
     sizes = np.bincount(seg[cand], minlength=seg.max() + 1)
     sids = np.nonzero(sizes >= min_rows)[0]
-    frac, _, _ = _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm, depth)
+    frac, _, _ = _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm)
     hits = frac >= share
     one = np.nonzero(hits.sum(axis=1) == 1)[0]
     return dict(zip(sids[one].tolist(), hits[one].argmax(axis=1).tolist(), strict=True))
 
 
-def background_like(rays, planes, seg, mask, bg_planes, exclude: set, share: float = 0.8, depth=None
-                    ) -> np.ndarray:
+def background_like(rays, planes, seg, mask, bg_planes, exclude: set, share: float = 0.8) -> np.ndarray:
     """(M,) True for centres of segments (in ``mask``, not in ``exclude``) that some stripe index puts
-    on a background plane for at least ``share`` of their points. depth : as in claim_background"""
+    on a background plane for at least ``share`` of their points."""
     out = np.zeros(len(seg), bool)
     weigh = np.zeros(seg.max() + 1, bool)
     weigh[seg[mask]] = True
     weigh[np.fromiter(exclude, np.int64, len(exclude))] = False
     sids = np.flatnonzero(weigh)
-    frac, idx, starts = _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, 8.0, depth)
+    frac, idx, starts = _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, 8.0)
     like = frac.max(axis=1, initial=0.0) >= share
     out[idx[np.repeat(like, np.diff(starts))]] = True
     return out

@@ -211,7 +211,7 @@ def _linked(x: np.ndarray, y: np.ndarray, w: int, strong: np.ndarray, weak: np.n
             ) -> np.ndarray:
     """(M,) bool: weak candidates joined to a strong one through weak ones, row to row (one or two rows
     apart, within ``link`` columns). x, y : (M,) int64 pixels in raster order (as cv2.findNonZero gives)."""
-    from scipy.sparse import coo_matrix
+    from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components
 
     m = len(x)
@@ -230,7 +230,7 @@ def _linked(x: np.ndarray, y: np.ndarray, w: int, strong: np.ndarray, weak: np.n
             src.append(wi[ok])
             dst.append(j[ok])
     a, b = np.concatenate(src), np.concatenate(dst)
-    _, comp = connected_components(coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m)), directed=False)
+    _, comp = connected_components(csr_matrix((np.ones(len(a)), (a, b)), shape=(m, m)), directed=False)
     reached = np.zeros(comp.max() + 1, bool)
     reached[comp[strong]] = True
     return weak & reached[comp]

@@ -33,6 +33,7 @@ from .background import (
 )
 from .detection import Centres, reliable
 from .offsets import (
+    BinTable,
     behind_background,
     conflict_curve,
     elevation_bins,
@@ -51,7 +52,7 @@ from .segments import (
     smooth_along_segments,
     split_at_changes,
 )
-from .triangulation import depth_for_labels, depth_on, intersect
+from .triangulation import depth_in_range, depth_on, intersect
 
 __all__ = ["Labels", "MatchingParams", "denoise", "label_centres", "link_segments", "smooth_along_segments"]
 GAP_PENALTY_MM = 8.0
@@ -78,18 +79,19 @@ class MatchingParams:
     denoise: bool = True
 
 
-def main_row_labels(c: Centres, n: int) -> np.ndarray:
+def main_row_labels(c: Centres, n: int, order: np.ndarray | None = None) -> np.ndarray:
     """Labels (M,) from rows that show all n stripes, -1 elsewhere: rows holding exactly n evenly spread
     centres, and rows missing up to n // 8 of them where each missing stripe leaves one gap of twice the
     local spacing (a noisy sensor loses the dim stripes of a floor seen at a grazing angle, and then no
-    floor row holds all n)."""
+    floor row holds all n). order : row_order(c), if known"""
     labels = np.full(len(c), -1, np.int64)
     counts = np.bincount(c.v, minlength=int(c.v.max(initial=0)) + 1)
-    full = counts[c.v] == n
-    idx = np.nonzero(full)[0]
-    if len(idx) == 0:
+    # the rows of a given count in row order: the frame's row order restricted to them (a stable sort)
+    every = row_order(c) if order is None else order
+    row_count = counts[c.v[every]]
+    order = every[row_count == n]
+    if len(order) == 0:
         return labels
-    order = idx[row_order(c.take(idx))]
     grid = c.u[order].reshape(-1, n)
     gaps = np.diff(grid, axis=1)
     # spacing changes slowly along a row on a smooth surface: no gap may jump against its neighbours
@@ -98,19 +100,18 @@ def main_row_labels(c: Centres, n: int) -> np.ndarray:
     rows_ok = np.repeat(regular, n)
     labels[order[rows_ok]] = np.tile(np.arange(n), regular.sum())
     for m in range(n - n // 8, n):
-        _gapped_rows(c, counts, m, n, labels)
+        _gapped_rows(c, every[row_count == m], m, n, labels)
     return labels
 
 
-def _gapped_rows(c: Centres, counts: np.ndarray, m: int, n: int, labels: np.ndarray, window: int = 7,
+def _gapped_rows(c: Centres, order: np.ndarray, m: int, n: int, labels: np.ndarray, window: int = 7,
                  slack: float = 0.2) -> None:
-    """Write into ``labels`` (M,) the labels of the rows holding m < n centres whose gaps are each one
-    or two local spacings (the median gap of the ``window`` around it), within ``slack``, adding up to
-    n - 1 spacings, and whose spacing per stripe changes smoothly along the row."""
-    idx = np.nonzero(counts[c.v] == m)[0]
-    if len(idx) == 0 or m < window + 1:
+    """Write into ``labels`` (M,) the labels of the rows holding m < n centres (``order``: theirs, in
+    row order) whose gaps are each one or two local spacings (the median gap of the ``window`` around
+    it), within ``slack``, adding up to n - 1 spacings, and whose spacing per stripe changes smoothly
+    along the row."""
+    if len(order) == 0 or m < window + 1:
         return
-    order = idx[row_order(c.take(idx))]
     gaps = np.diff(c.u[order].reshape(-1, m), axis=1)  # (R, m - 1) pixels
     pad = window // 2
     windows = np.lib.stride_tricks.sliding_window_view(np.pad(gaps, ((0, 0), (pad, pad)), mode="edge"), window,
@@ -178,11 +179,12 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     if m == 0:
         return Labels(np.zeros(0, np.int64), None)
     link = params.link_px * max(shape[1] / 3072.0, 0.5)
-    seg = split_at_changes(c, link_segments(c, link))
+    order = row_order(c)
+    seg = split_at_changes(c, link_segments(c, link, order))
     long_seg = np.bincount(seg)[seg] >= params.min_segment_rows
-    left, right = row_neighbours(c)
+    left, right = row_neighbours(c, order)
     # 1: the background (floor, wall) from complete rows
-    seg_label = _segment_vote(seg, np.where(long_seg, main_row_labels(c, n), -1))
+    seg_label = _segment_vote(seg, np.where(long_seg, main_row_labels(c, n, order), -1))
     labels = _labels_of(seg, seg_label, long_seg)
     # 2: a stripe that continued across the animal's outline in the image carried a background index
     # onto the animal; such centres sit off the background surfaces: cut them off as foreground
@@ -195,26 +197,26 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     # 3: the background grows over its own surfaces; a segment joins it only if it then lies on them
     pairs = _neighbour_pairs(seg, long_seg, left, right)  # every growth below takes its centres' share
     _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, 1.7 * spacing_mm, n, bg_planes, pairs=pairs)
-    z_all = depth_for_labels(rays, planes)  # (M, N): every centre on every light plane, computed once
     # 3b: unlabelled pieces of floor or wall (between the legs, beside the outline) are claimed by the
     # one label that puts them on a background plane
     if bg_planes is not None:
-        seg_label.update(claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, depth=z_all))
+        seg_label.update(claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n))
     # 4: foreground clusters: relative labels by growing from a seed, offset from the shadow they cast
     weighed = np.zeros(m, bool)
     bg_labels = dict(seg_label)
     bg_cl = _labels_of(seg, seg_label, long_seg)
     bg_lit = lit_cells(rays, planes, bg_cl, np.flatnonzero(bg_cl >= 0))
+    table = BinTable(rays, planes)  # the pieces' elevation bins, shared by every conflict curve below
     fg_labels, small, cl, lit, first = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol,
-                                                   n, z_all, weighed, params.depth_range_mm, bg_planes, bg_lit,
-                                                   pairs)
+                                                   n, weighed, params.depth_range_mm, bg_planes, bg_lit,
+                                                   pairs, table)
     if fg_labels:
         # pieces of the animal without shadow evidence of their own continue a labelled piece's surface
         is_bg = np.zeros(seg.max() + 1, bool)
         is_bg[list(seg_label)] = True
         fg_mask = long_seg & ~is_bg[seg]
         if bg_planes is not None:  # leave alone what some index would put on the floor or wall
-            fg_mask &= ~background_like(rays, planes, seg, fg_mask, bg_planes, set(fg_labels), depth=z_all)
+            fg_mask &= ~background_like(rays, planes, seg, fg_mask, bg_planes, set(fg_labels))
         fg_pairs = pairs.of(fg_mask)
         _grow_all(c, rays, planes, seg, fg_labels, fg_mask, left, right, tol, n, None, depth_only=True,
                   gaps=(1,), min_share=0.8, slope=True, pairs=fg_pairs)
@@ -223,29 +225,30 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
         seg_label.update(_continue_along(c, rays, planes, seg, seg_label, fg_mask, set(fg_labels), link,
                                          0.25 * spacing_mm, lit))
     if fg_labels and small:  # isolated small pieces (a head seen from above) hemmed in by what is placed
-        seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit))
+        seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit, table))
     if fg_labels and first is not None:  # the whole animal weighed again, with what joined after the first piece
         fg = {s: k for s, k in seg_label.items() if s not in bg_labels}
         shift = _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg, fg_mask, fg_pairs, long_seg, left,
-                                    right, tol, n, bg_planes, first)
+                                    right, tol, n, bg_planes, first, table)
         if shift:
             seg_label = {**bg_labels, **{s: k + shift for s, k in fg.items() if 0 <= k + shift < n}}
             if _TRACE is not None:  # (no centres, no relative labels, the shift of every animal label)
                 _TRACE.append((None, None, shift))
     labels = _labels_of(seg, seg_label, long_seg)
     ok = labels >= 0
-    zmin, zmax = params.depth_range_mm
-    z = np.where(ok, z_all[np.arange(m), np.clip(labels, 0, n - 1)], np.nan)
-    labels[ok & ~((z > zmin) & (z < zmax))] = -1
-    labels = _enforce_row_order(c, labels)
+    at = np.flatnonzero(ok)
+    labels[at[~depth_in_range(rays.take(at, axis=0), planes, labels[at], *params.depth_range_mm)]] = -1
+    labels = _enforce_row_order(c, labels, order)
     return Labels(labels, bg_planes, seg, int(weighed.sum()), int((weighed & (labels < 0)).sum()))
 
 
-def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, z_all, weighed, zrange,
-                bg_planes, bg_lit, pairs: _Pairs) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None]:
+def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, weighed, zrange,
+                bg_planes, bg_lit, pairs: _Pairs, table: BinTable
+                ) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None]:
     """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
     (M,) the centres of every piece that was weighed for an offset. ``bg_lit`` : the projector cells lit
-    at the labels of ``seg_label`` (``lit_cells``); ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``.
+    at the labels of ``seg_label`` (``lit_cells``); ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``;
+    ``table`` : the ``BinTable`` the conflict curves share.
     Also returns the per-centre labels (M,) of the background and the placed pieces, the projector cells
     they light (``lit_cells``) and the centres (K,) of the first piece placed (None if none was).
 
@@ -272,15 +275,15 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         weighed[idx] = True
         rel = _relative(seg, trial, mid)
         off = occlusion_offset(rays, planes, cl, rel[seg], idx, n, projector_right(planes), background=bg_planes,
-                               beside_placed=len(idx) < placed_max, lit=lit)
+                               beside_placed=len(idx) < placed_max, lit=lit, table=table)
         if _TRACE is not None:
             _TRACE.append((idx, rel[seg[idx]], off))
         if off is None:
             continue
         lab = rel[seg[idx]] + off
         inside = (lab >= 0) & (lab < n)
-        z = z_all[idx[inside], lab[inside]]
-        if inside.mean() < 0.8 or np.mean((z > zrange[0]) & (z < zrange[1])) < 0.9:
+        if inside.mean() < 0.8 or np.mean(depth_in_range(rays.take(idx[inside], axis=0), planes, lab[inside],
+                                                         *zrange)) < 0.9:
             continue
         out.update(_placed(trial, rel, off, n))
         lit = _claim(rays, planes, cl, lit, idx, lab)
@@ -319,10 +322,12 @@ def _pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pair
 
 
 def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask, fg_pairs, long_seg, left, right, tol, n,
-                        bg_planes, first, max_behind: float = 0.001, evidence_share: float = 0.6) -> int:
+                        bg_planes, first, table: BinTable, max_behind: float = 0.001, evidence_share: float = 0.6
+                        ) -> int:
     """Stripes (0 or a shift away from the conflicts) by which to move every animal label in ``fg_labels``
     (segment -> label), from the conflict curve of all of them together against the background's labels
-    ``bg_cl`` (M,) and the cells they light ``bg_lit``; ``fg_pairs`` : the ``_neighbour_pairs`` of ``fg_mask``.
+    ``bg_cl`` (M,) and the cells they light ``bg_lit``; ``fg_pairs`` : the ``_neighbour_pairs`` of ``fg_mask``;
+    ``table`` : the ``BinTable`` the conflict curves share.
 
     The first piece's offset was read from its own outline; an extremity on the lit side that joined only
     later (a tail seen from above, linked again only after growth, continuation or a small piece) leaves
@@ -342,7 +347,7 @@ def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask,
         return 0
     r = np.maximum(r, 0)  # occlusion_offset and behind_background read only the animal's centres
     right_side = projector_right(planes)
-    shift = occlusion_offset(rays, planes, bg_cl, r, idx, n, right_side, lit=bg_lit)
+    shift = occlusion_offset(rays, planes, bg_cl, r, idx, n, right_side, lit=bg_lit, table=table)
     if not shift or (shift > 0) != right_side:
         return 0
     if bg_planes is not None and behind_background(rays, planes, r, first, n, bg_planes, shift) > max_behind:
@@ -423,11 +428,12 @@ def _lit_share(rays, planes, seg, sid, k, lit) -> float:
     return float((in_sorted(cells, lit) & in_sorted(cells - 1, lit) & in_sorted(cells + 1, lit)).mean())
 
 
-def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, known, lit) -> dict[int, int]:
+def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, known, lit, table: BinTable
+                 ) -> dict[int, int]:
     """Labels for the small pieces that growth from their neighbours did not reach: each is placed only
     where the background and the pieces already labelled hem it in on both sides (the bottom of a V in
     its conflict curve); the others stay unlabelled. ``known`` (M,) labels (a subset of ``seg_label``'s)
-    whose cells ``lit`` holds."""
+    whose cells ``lit`` holds; ``table`` : the ``BinTable`` the conflict curves share."""
     out: dict[int, int] = {}
     cl = _labels_of(seg, seg_label, long_seg)
     # labels only join seg_label, never change: the centres labelled since add their cells
@@ -438,7 +444,7 @@ def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, know
             continue
         weighed[idx] = True
         rel = _relative(seg, trial, mid)
-        curve = conflict_curve(rays, planes, cl, rel[seg], idx, n, lit=lit)
+        curve = conflict_curve(rays, planes, cl, rel[seg], idx, n, lit=lit, table=table)
         # a small piece has few cells to conflict with: a bottom with conflicts is a piece mislinked
         off = sharp_minimum(*curve, max_floor=SMALL_FLOOR) if curve is not None else None
         if _TRACE is not None:
@@ -606,20 +612,26 @@ class _Pairs:
 
 def _neighbour_pairs(seg, mask, left, right) -> _Pairs:
     """The centres in ``mask`` whose row neighbour on a side lies in another segment (``_Pairs``)."""
-    parts = []
     members = np.flatnonzero(mask)
-    own_all = seg[members]
-    for nb, sign in ((left, 1), (right, -1)):
+    own = seg[members]
+    sides = []
+    for nb in (left, right):
         nbr = nb[members]
-        has = nbr >= 0
-        idx, nbr, own = members[has], nbr[has], own_all[has]
-        other = seg[nbr]
-        keep = other != own
-        idx, nbr, own, other = idx[keep], nbr[keep], own[keep], other[keep]
-        far = nb[nbr]
-        far_seg = np.where(far >= 0, seg[np.maximum(far, 0)], -1)
-        parts.append((idx, nbr, np.full(len(idx), sign, np.int64), own, other, far, far_seg))
-    return _Pairs(np.concatenate([np.stack(part) for part in parts], axis=1))
+        # a missing neighbour (-1) reads seg[-1], but the first test drops it
+        keep = np.flatnonzero((nbr >= 0) & (seg[nbr] != own))
+        sides.append((keep, nbr.take(keep)))
+    # the rows written in place into one array: no per-side stacks to join
+    cols = np.empty((7, len(sides[0][0]) + len(sides[1][0])), np.int64)
+    parts = (cols[:, :len(sides[0][0])], cols[:, len(sides[0][0]):])
+    for part, (keep, nbr), nb, sign in zip(parts, sides, (left, right), (1, -1), strict=True):
+        part[0] = members.take(keep)
+        part[1] = nbr
+        part[2] = sign
+        part[3] = own.take(keep)
+        part[4] = seg.take(nbr)
+        part[5] = nb.take(nbr)
+        part[6] = np.where(part[5] >= 0, seg.take(np.maximum(part[5], 0)), -1)
+    return _Pairs(cols)
 
 
 def _open_pairs(pairs: _Pairs, table: np.ndarray) -> _Pairs:
@@ -754,11 +766,10 @@ def _refine(rays, planes, seg, seg_label, pairs: _Pairs, tol_mm, n, rounds: int 
         table[np.fromiter(changed.keys(), np.int64)] = np.fromiter(changed.values(), np.int64)
 
 
-def _enforce_row_order(c: Centres, labels: np.ndarray) -> np.ndarray:
+def _enforce_row_order(c: Centres, labels: np.ndarray, order: np.ndarray) -> np.ndarray:
     """Within a row, labels must increase left to right; drop the centres that break the order (the
     minority of a longest increasing run would be better; dropping both sides of each inversion is
-    simpler and loses few centres)."""
-    order = row_order(c)
+    simpler and loses few centres). order : row_order(c)"""
     lab = labels[order]
     v = c.v[order]
     valid = lab >= 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
-from scipy.sparse import coo_matrix
+from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from .detection import Centres
@@ -29,13 +29,13 @@ def denoise(c: Centres, shape: tuple[int, int]) -> np.ndarray:
     return counts.ravel()[flat] >= 0.5 * wdt
 
 
-def link_segments(c: Centres, link_px: float) -> np.ndarray:
+def link_segments(c: Centres, link_px: float, order: np.ndarray | None = None) -> np.ndarray:
     """Segment id (M,) per centre: centres in consecutive rows (or one row apart) within ``link_px``
-    columns, linked one-to-one (mutual nearest), then connected components."""
+    columns, linked one-to-one (mutual nearest), then connected components. order : row_order(c), if known"""
     m = len(c)
     if m == 0:
         return np.zeros(0, np.int64)
-    order = row_order(c)
+    order = row_order(c) if order is None else order
     key = c.v[order].astype(np.float64) * 1e5 + c.u[order]
     src, dst = [], []
     for gap in (1, 2):
@@ -48,7 +48,7 @@ def link_segments(c: Centres, link_px: float) -> np.ndarray:
         src.append(a[mutual])
         dst.append(b[mutual])
     s, d = np.concatenate(src), np.concatenate(dst)
-    graph = coo_matrix((np.ones(len(s)), (s, d)), shape=(m, m))
+    graph = csr_matrix((np.ones(len(s)), (s, d)), shape=(m, m))  # CSR: connected_components converts COO first
     _, comp = connected_components(graph, directed=False)
     seg = np.empty(m, np.int64)
     seg[order] = comp
@@ -189,9 +189,10 @@ def _padded_cumsum(x: np.ndarray) -> np.ndarray:
     return np.cumsum(np.concatenate([np.zeros((len(x), 1)), x], axis=1), axis=1)
 
 
-def row_neighbours(c: Centres) -> tuple[np.ndarray, np.ndarray]:
-    """Index of the left and right neighbour of each centre in its row (-1 at the row's ends)."""
-    order = row_order(c)
+def row_neighbours(c: Centres, order: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the left and right neighbour of each centre in its row (-1 at the row's ends).
+    order : row_order(c), if known"""
+    order = row_order(c) if order is None else order
     left = np.full(len(c), -1, np.int64)
     right = np.full(len(c), -1, np.int64)
     same = c.v[order][1:] == c.v[order][:-1]

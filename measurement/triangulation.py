@@ -64,7 +64,30 @@ def depth_on(rays: np.ndarray, planes: np.ndarray) -> np.ndarray:
 
 
 def depth_for_labels(rays: np.ndarray, planes: np.ndarray) -> np.ndarray:
-    """Depth z (M, K) mm of each ray (M, 3) on every plane (K, 4); NaN/negative where behind the camera."""
+    """Depth z (M, K) mm of each ray (M, 3) on every plane (K, 4); NaN/negative where behind the camera.
+    Each row comes out the same whichever other rows share the call."""
+    if len(rays) == 1:  # one row alone would take BLAS's matrix-vector product, which rounds differently
+        return depth_for_labels(np.repeat(rays, 2, axis=0), planes)[:1]
     z = rays @ planes[:, :3].T
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.divide(planes[None, :, 3], z, out=z)  # in place: one (M, K) array, not two
+
+
+def depth_in_range(rays: np.ndarray, planes: np.ndarray, k: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """(M,) True where lo < z < hi for the depth z of each ray (M, 3) on its plane ``k`` (M,) as
+    ``depth_for_labels`` gives it, without that (M, N) matrix: z is formed ray by ray (the same formula,
+    rounded another way), and where it lies within that rounding of a bound, or is not finite, the
+    matrix's row decides."""
+    p = planes.take(k, axis=0)
+    dot = np.einsum("ij,ij->i", rays, p[:, :3])
+    # both sums of three products err by under 4 ulp of the sum of their magnitudes: a margin 1000 times that
+    size = np.einsum("ij,ij->i", np.abs(rays), np.abs(p[:, :3]))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = p[:, 3] / dot
+        margin = np.abs(z) * 1e-12 * (1 + size / np.abs(dot))
+    out = (z > lo) & (z < hi)
+    unsure = np.flatnonzero(~(np.minimum(np.abs(z - lo), np.abs(z - hi)) > margin))
+    if len(unsure):
+        z = depth_for_labels(rays.take(unsure, axis=0), planes)[np.arange(len(unsure)), k[unsure]]
+        out[unsure] = (z > lo) & (z < hi)
+    return out
