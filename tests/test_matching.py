@@ -271,7 +271,7 @@ def test_pieces_are_weighed_largest_first(monkeypatch):
 
     monkeypatch.setattr(m, "occlusion_offset", offset)
     weighed = np.zeros(500, bool)
-    m._foreground(None, None, None, seg, {}, np.ones(500, bool), None, None, 10.0, 40, None, weighed,
-                  (400.0, 3500.0), None, np.zeros(0, np.int64), None)
+    m._foreground(None, None, None, seg, {}, np.ones(500, bool), None, None, 10.0, 40, weighed, (400.0, 3500.0),
+                  None, np.zeros(0, np.int64), None, None)
     assert weighed_sizes == [400, 100]
     assert weighed.all()
