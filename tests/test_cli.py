@@ -58,3 +58,16 @@ def test_missing_capture_and_bad_size_flag_are_reported_plainly(tmp_path):
     assert r.returncode == 2 and "capture folder not found" in r.stderr and "Traceback" not in r.stderr
     r = bodyscan("simulate", tmp_path / "x", "--size", "big")
     assert r.returncode == 2 and "--size must look like" in r.stderr
+
+
+@pytest.mark.parametrize("given, expected", [(None, "1"), ("2", "2")])
+def test_the_command_line_runs_numpy_on_one_blas_thread_unless_told_otherwise(given, expected):
+    """Two job workers on two cores: BLAS threads on three-column products only wait for each other."""
+    import os
+
+    env = {k: v for k, v in os.environ.items() if k != "OPENBLAS_NUM_THREADS"}
+    if given is not None:
+        env["OPENBLAS_NUM_THREADS"] = given
+    code = "import app.cli, os, numpy; print(os.environ['OPENBLAS_NUM_THREADS'])"
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == expected
