@@ -10,7 +10,9 @@ from measurement.detection import (
     algorithm2_centres,
     check_image,
     detect_centres,
+    noise_sigma,
     reliable,
+    subtract_ambient,
 )
 from measurement.errors import ImageError, StripeDetectionError
 from measurement.images import read_image
@@ -120,6 +122,23 @@ def test_ambient_image_of_another_size_is_refused(small_capture):
     img, _ = _side(small_capture)
     with pytest.raises(ImageError, match="ambient"):
         detect_centres(img, ambient=img[:100])
+
+
+def test_the_ambient_image_is_subtracted_without_cutting_the_dim_background_at_zero():
+    # a dim room (5 gray levels, noise 2 in both shots) and faint stripes (+9 at the peak), as on a dark floor
+    rng = np.random.default_rng(3)
+    x = np.arange(1536)
+    centres = np.arange(60, 1476, 72)
+    stripes = sum(np.exp(-0.5 * ((x - c) / 2.5) ** 2) for c in centres)
+    img = np.clip(np.rint(5 + 9 * stripes + rng.normal(0, 2, (200, 1536))), 0, 255).astype(np.uint8)
+    ambient = np.clip(np.rint(5 + rng.normal(0, 2, (200, 1536))), 0, 255).astype(np.uint8)
+    diff = subtract_ambient(img, ambient)
+    assert abs(noise_sigma(diff) - 2 * np.sqrt(2)) < 0.5  # both shots' noise is left, none cut off at 0
+
+    def found(c):
+        return int(sum((np.abs(c.u - k) < 1.5).sum() for k in centres))
+
+    assert found(detect_centres(img, ambient=ambient)) >= found(detect_centres(img)) > 500
 
 
 def test_blank_saturated_and_wrong_size_images_are_refused():
