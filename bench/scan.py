@@ -1,6 +1,6 @@
 """Scan pipeline accuracy and speed on the rig simulator (full resolution by default).
 
-    python bench/scan.py [--size 3072x2048] [--cache DIR] [--repeats 7] [--configs 40-fur,40-clean,50-fur]
+    python bench/scan.py [--size 3072x2048] [--cache DIR] [--repeats 7] [--configs 40-fur,40-clean,50-fur] [--ambient]
 
 For each configuration (stripe count, fur or clean) and view (side, top): stripe-label correctness
 against the simulator's exact plane crossings, the share of animal points within 2 mm of the true
@@ -41,11 +41,12 @@ def capture_for(cache: Path, stripes: int, fur: bool, size: tuple[int, int], see
     return cached_capture(cache / f"scan-{size[0]}x{size[1]}-{stripes}-{'fur' if fur else 'clean'}-{seed}",
                           stripes=stripes, size=size, seed=seed, fur=fur)
 
-def evaluate(cap: Path, view: str) -> dict:
+def evaluate(cap: Path, view: str, ambient: bool = False) -> dict:
+    """The figures of one view; with ``ambient``, scanned with its stripes-off image too."""
     cal = load_calibration(cap / "truth" / "truth.json")
     info = json.loads((cap / "truth" / "truth.json").read_text())["views"][view]
     img = read_image(cap / "scan" / f"{view}.png")
-    r = scan(img, cal, view)
+    r = scan(img, cal, view, ambient=read_image(cap / "scan" / f"{view}_ambient.png") if ambient else None)
     t = dict(np.load(cap / "truth" / f"{view}_stripes.npz"))
     tk, kind = match_crossings(r.scene_uv, t)
     on_animal = kind == ANIMAL
@@ -125,6 +126,7 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--seed", type=int, default=4)
     ap.add_argument("--configs", default="40-fur,40-clean,50-fur,50-clean")
+    ap.add_argument("--ambient", action="store_true", help="scan with each view's ambient (stripes off) image too")
     args = ap.parse_args()
     size = tuple(int(v) for v in args.size.split("x"))
     cache = Path(args.cache)
@@ -137,7 +139,7 @@ def main() -> None:
         cap = capture_for(cache, int(stripes), kind == "fur", size, args.seed)
         first = first or cap
         for view in ("side", "top"):
-            e = evaluate(cap, view)
+            e = evaluate(cap, view, args.ambient)
             print(f"{cfg:10s} {view:4s} {e['animal_points']:7d}/{e['animal_truth_crossings']:<6d} "
                   f"{e['animal_label_right']:8.2%} / {e['background_label_right']:7.3%}   "
                   f"{e['within_2mm']:9.2%}  {e['rms_within_mm']:6.3f}  "
