@@ -275,3 +275,27 @@ def test_pieces_are_weighed_largest_first(monkeypatch):
                   None, np.zeros(0, np.int64), None, None)
     assert weighed_sizes == [400, 100]
     assert weighed.all()
+
+
+def test_a_floor_claim_must_be_as_flat_as_the_labelled_floor():
+    from measurement.background import claim_background
+
+    n = 40
+    planes = np.column_stack([np.ones(n), np.zeros(n), np.zeros(n), 10.0 * np.arange(n)])  # x = 10 k mm
+    floor = np.array([[0.0, 1.0, 0.0, 500.0]])  # y = 500 mm
+    rng = np.random.default_rng(0)
+
+    def segment(k, z, wobble):
+        p = np.column_stack([np.full(len(z), 10.0 * k), 500 + wobble, z])
+        return p / p[:, 2:]  # the rays (z = 1) through those points
+
+    z = np.linspace(1100, 1300, 40)
+    rays = [segment(k, z, rng.normal(0, 0.1, len(z))) for k in (5, 6, 7)]  # the labelled floor, 0.1 mm noise
+    rays.append(segment(20, z, rng.normal(0, 0.1, len(z))))  # a floor piece beside the outline
+    rays.append(segment(25, z, np.where(np.arange(len(z)) % 2, 2.5, -2.5)))  # within 5 mm, 25x the noise
+    rays = np.vstack(rays)
+    seg = np.repeat(np.arange(5), len(z))
+    claims = claim_background(None, rays, planes, seg, {0: 5, 1: 6, 2: 7}, np.ones(len(seg), bool), floor, n)
+    assert claims == {3: 20}
+    assert claim_background(None, rays, planes, seg, {0: 5, 1: 6, 2: 7}, np.ones(len(seg), bool), floor, n,
+                            flatness=np.inf) == {3: 20, 4: 25}
