@@ -250,7 +250,10 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     at the labels of ``seg_label`` (``lit_cells``); ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``;
     ``table`` : the ``BinTable`` the conflict curves share.
     Also returns the per-centre labels (M,) of the background and the placed pieces, the projector cells
-    they light (``lit_cells``) and the centres (K,) of the first piece placed (None if none was).
+    they light (``lit_cells``) and the centres (K,) of the first piece placed (None if none was, or if it
+    was read off a steady shallow ramp: the whole-animal weighing then stays off, since the stray conflicts
+    of the grown union outweigh such a ramp; a spot cow seen from above was placed right and then moved).
+    Pieces whose curve is a steady but shallow ramp are read at its minimum (``choose_offset``).
 
     Each piece (``_pieces``) is placed from its conflict curve, largest first, with the pieces placed
     before it counting as lit: the largest carries the most shadow evidence, and the first piece placed
@@ -264,7 +267,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     mid = n // 2
     placed_max = 0  # centres in the largest piece placed so far
     small = []
-    first = None
+    first, first_shallow = None, False
     found = sorted(_pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pairs, mid),
                    key=lambda piece: -len(piece[0]))
     for idx, trial in found:
@@ -274,8 +277,10 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
             continue
         weighed[idx] = True
         rel = _relative(seg, trial, mid)
+        reading: dict = {}
         off = occlusion_offset(rays, planes, cl, rel[seg], idx, n, projector_right(planes), background=bg_planes,
-                               beside_placed=len(idx) < placed_max, lit=lit, table=table)
+                               beside_placed=len(idx) < placed_max, lit=lit, table=table, shallow=True,
+                               report=reading)
         if _TRACE is not None:
             _TRACE.append((idx, rel[seg[idx]], off))
         if off is None:
@@ -287,9 +292,11 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
             continue
         out.update(_placed(trial, rel, off, n))
         lit = _claim(rays, planes, cl, lit, idx, lab)
-        first = idx if first is None else first
+        if first is None:
+            first = idx
+            first_shallow = bool(reading.get("shallow"))
         placed_max = max(placed_max, len(idx))
-    return out, small, cl, lit, first
+    return out, small, cl, lit, None if first_shallow else first
 
 
 def _pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pairs: _Pairs, mid: int

@@ -177,7 +177,8 @@ def _thinned(idx: np.ndarray, most: int = 20000) -> np.ndarray:
 def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, bins: float = 0.002,
                       residue: float = 0.5, pattern_edge: float = 0.02, beside_placed: bool = False,
                       lit: np.ndarray | None = None, background: np.ndarray | None = None,
-                      table: BinTable | None = None) -> int | None:
+                      table: BinTable | None = None, shallow: bool = False, report: dict | None = None
+                      ) -> int | None:
     """Absolute offset of a cluster with relative labels ``r[idx]``, from the projector's point of view.
 
     A background point lit by stripe k at projector elevation e proves that nothing stood in front of it
@@ -209,7 +210,8 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
     if background is not None and not beside_placed:
         def behind(off: int) -> float:
             return behind_background(rays, planes, r, idx, n, background, off)
-    return choose_offset(*curve, projector_right, pattern_edge, beside_placed, residue, behind=behind)
+    return choose_offset(*curve, projector_right, pattern_edge, beside_placed, residue, behind=behind,
+                         shallow=shallow, report=report)
 
 
 def behind_background(rays, planes, r, idx, n, background: np.ndarray, off: int, margin_mm: float = 8.0
@@ -322,10 +324,15 @@ def _distinct_cells(group: np.ndarray, stripe: np.ndarray, e: np.ndarray, groups
 def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, float]], projector_right: bool = True,
                   pattern_edge: float = 0.02, beside_placed: bool = False, residue: float = 0.5,
                   ramp_steps: int = 12, behind: Callable[[int], float] | None = None,
-                  max_behind: float = 0.001) -> int | None:
+                  max_behind: float = 0.001, shallow: bool = False, report: dict | None = None) -> int | None:
     """The offset read off a conflict curve (see ``occlusion_offset``); ``behind`` : offset -> the share
     of the piece it puts behind the floor or wall, of which at most ``max_behind`` is tolerated (on the
-    simulator's renders the right offset puts none there, one stripe deeper 0.2-2.4 %)."""
+    simulator's renders the right offset puts none there, one stripe deeper 0.2-2.4 %).
+
+    With ``shallow``, a ramp too shallow to read the usual way (steps under 0.005 of the piece's cells: a
+    blob seen from above or a sitting rabbit hides most of its shadow's lit edge) still places the piece
+    when it is steady (``steady_ramp``): then at its minimum, since a residue of half such a step is
+    already the whole next column's conflicts. ``report`` (if given) gets "shallow": whether it was."""
     if beside_placed:
         sharp = sharp_minimum(conflicts, beyond)
         if sharp is not None:
@@ -350,8 +357,12 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
         if possible.any():
             i = int(np.argmin(np.where(possible, vals, np.inf)))
             step = _ramp_step(vals, i, ramp_steps)
-    if step <= 0.005:  # no ramp: nothing bounds the piece on the lit side
-        return None
+    if step <= 0.005:  # no ramp: nothing bounds the piece on the lit side, unless a steady shallow one does
+        if not (shallow and possible[i] and steady_ramp(vals, i)):
+            return None
+        residue = 0.1
+        if report is not None:
+            report["shallow"] = True
     floor = float(vals[i])
     # the first tolerated offset coming up the ramp: with a noisy sensor the flat side is bumpy, and a
     # bump over the tolerance between the ramp's foot and the minimum must not hold the reading there
@@ -386,6 +397,17 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
     while behind is not None and best + toward in conflicts and behind(best) > max_behind:
         best += toward
     return int(best)
+
+
+def steady_ramp(vals: np.ndarray, i: int, run: int = 5, rise: float = 0.004) -> bool:
+    """Whether the curve ``vals`` (conflicts rising toward lower indices) comes down to its minimum at
+    ``i`` without a bump over the last ``run`` steps, falling by at least ``rise`` on them to a floor
+    under a tenth of that fall."""
+    if i < run:
+        return False
+    part = vals[i - run:i + 1]
+    fall = float(part[0] - part[-1])
+    return bool((np.diff(part) <= 0).all() and fall >= rise and part[-1] <= 0.1 * fall)
 
 
 def _ramp_step(vals: np.ndarray, i: int, ramp_steps: int) -> float:

@@ -104,6 +104,25 @@ def test_a_piece_with_play_between_its_conflicts_and_the_pattern_edge_is_refused
     assert choose_offset(*curve(24), behind=lambda off: 0.05 if off >= 26 else 0.0) is None
 
 
+def test_a_steady_shallow_ramp_places_the_piece_at_its_minimum_when_asked():
+    """A sitting rabbit seen from the side (1536 px) hides most of its shadow's lit edge: its conflicts
+    fall steadily by under 0.005 a stripe to zero at the true offset, 27. The usual reading refuses such a
+    curve; the shallow one takes its minimum, not the offset half a step up the ramp (26)."""
+    from measurement.offsets import choose_offset, steady_ramp
+
+    conflicts = {19: 0.0107, 20: 0.0087, 21: 0.0069, 22: 0.0054, 23: 0.0048, 24: 0.0038, 25: 0.0022,
+                 26: 0.0008, 27: 0.0, 28: 0.0007, 29: 0.0025, 30: 0.0048, 31: 0.0074}
+    beyond = {o: (0.0, 0.0) for o in conflicts}
+    assert choose_offset(conflicts, beyond) is None
+    assert choose_offset(conflicts, beyond, shallow=True) == 27
+    # a bump on the way down, or a curve that barely falls, is no ramp
+    bumpy = {**conflicts, 24: 0.0060}
+    assert not steady_ramp(np.array([bumpy[o] for o in sorted(bumpy)]), 8)
+    assert choose_offset(bumpy, beyond, shallow=True) is None
+    flat = {o: 0.0005 + 0.0001 * (27 - o) * (o < 27) for o in conflicts}
+    assert choose_offset(flat, beyond, shallow=True) is None
+
+
 def test_a_small_piece_that_conflicts_wherever_it_goes_is_not_placed():
     """A V whose bottom still puts a tenth of the piece on lit cells is a piece whose relative indices
     are wrong (a mislinked stub at the pattern's edge): ``max_floor`` refuses it."""
