@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _kernels
 from .background import (
     background_like,
     background_planes,
@@ -660,42 +661,36 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
     """One round of voting on label ``table`` (S,) by neighbour ``pairs``: segment -> label for the
     segments (unlabelled ones, or with ``relabel`` labelled ones) whose row neighbours agree on a label
     that continues their surface, for the segments flagged in ``active`` (S,) (all when None)."""
-    at = np.flatnonzero(active[pairs.own_seg]) if active is not None else np.arange(pairs.cols.shape[1])
-    own, kn = table[pairs.own_seg[at]], table[pairs.nb_seg[at]]
-    take = ((own >= 0) if relabel else (own < 0)) & (kn >= 0)
-    idx, nbr, sign, voter, nb_seg, far, far_seg = pairs.take(at[take])
-    kn = kn[take]
-    if len(idx) == 0:
+    active = np.ones(len(table), bool) if active is None else active
+    at = _kernels.voting_pairs(pairs.own_seg, pairs.nb_seg, table, active, relabel)
+    if len(at) == 0:
         return {}
     if depth_only:
-        zn = depth_on(rays.take(nbr, axis=0), planes.take(kn, axis=0))
+        step = np.zeros(0)
         if slope:
+            idx, nbr, sign, _, nb_seg, far, far_seg = pairs.take(at)
+            kn = table[nb_seg]
+            zn = depth_on(rays.take(nbr, axis=0), planes.take(kn, axis=0))
             step = _slope_steps(rays, planes, table, idx, nbr, sign, nb_seg, far, far_seg, kn, zn, tol_mm,
                                 seg_steps)
-    else:
-        pn = intersect(rays.take(nbr, axis=0), planes.take(kn, axis=0))
+        best_k = _kernels.depth_votes(rays, planes, table, pairs.cols, at, np.array(gaps, np.int64), tol_mm, n,
+                                      GAP_PENALTY_MM, step)
+        return _majority(pairs.own_seg[at], best_k, n, min_share)
+    idx, nbr, sign, voter, nb_seg, far, far_seg = pairs.take(at)
+    kn = table[nb_seg]
+    # on flat backgrounds the 3-D gap per stripe is the sharper test
+    pn = intersect(rays.take(nbr, axis=0), planes.take(kn, axis=0))
     # the voters' points on the planes of every gap at once (row by row as one gap at a time)
     ks = [kn + sign * gap for gap in gaps]
     on_k = np.clip(np.concatenate(ks), 0, n - 1)
     voter_rays = np.tile(rays.take(idx, axis=0), (len(gaps), 1))
-    if depth_only:
-        z_gap = depth_on(voter_rays, planes.take(on_k, axis=0)).reshape(len(gaps), -1)
-    else:
-        p_gap = intersect(voter_rays, planes.take(on_k, axis=0)).reshape(len(gaps), -1, 3)
+    p_gap = intersect(voter_rays, planes.take(on_k, axis=0)).reshape(len(gaps), -1, 3)
     best_k = np.full(len(idx), -1)
     best_d = np.full(len(idx), np.inf)
     for g, gap in enumerate(gaps):
         k = ks[g]
         okk = (k >= 0) & (k < n)
-        if depth_only:
-            # on a curved body, depth continuity separates a right index (median 3 mm on the simulated
-            # fox, 99 % under 36) from a wrong one (a whole depth step, 35-75 mm) better than 3-D gaps
-            d = np.abs(z_gap[g] - (zn + step * gap if slope else zn))
-            # a missing stripe is the rarer event: a wider gap must fit clearly better to win (a
-            # steep flank seen from above makes the right gap of one look discontinuous)
-            d = d + (gap - 1) * GAP_PENALTY_MM
-        else:  # on flat backgrounds the 3-D gap per stripe is the sharper test
-            d = np.linalg.norm(p_gap[g] - pn, axis=1) / gap
+        d = np.linalg.norm(p_gap[g] - pn, axis=1) / gap
         better = okk & (d < best_d) & (d < tol_mm)
         best_k[better], best_d[better] = k[better], d[better]
     return _majority(voter, best_k, n, min_share)
@@ -737,19 +732,8 @@ def _majority(voter: np.ndarray, vote: np.ndarray, n: int, min_share: float) -> 
     """Segment -> label for the segments whose most frequent vote (the earliest cast of a tie) has at
     least 3 votes and ``min_share`` of their voters. voter : (V,) segment ids; vote : (V,) labels in
     [0, n), -1 for a voter that found no label (it still counts as support)."""
-    cast = np.nonzero(vote >= 0)[0]
-    if len(cast) == 0:
-        return {}
-    support = np.bincount(voter)
-    pair, first, cnt = np.unique(voter[cast] * (n + 1) + vote[cast], return_index=True, return_counts=True)
-    segs, labs = pair // (n + 1), pair % (n + 1)
-    order = np.lexsort((first, -cnt, segs))
-    best = order[np.r_[True, segs[order][1:] != segs[order][:-1]]]
-    best = best[(cnt[best] >= 3) & (cnt[best] >= min_share * support[segs[best]])]
-    seg_first = np.full(len(support), len(cast))
-    np.minimum.at(seg_first, segs, first)
-    best = best[np.argsort(seg_first[segs[best]])]  # in the order the segments first got a vote
-    return dict(zip(segs[best].tolist(), labs[best].tolist(), strict=True))
+    segs, labs = _kernels.majority(voter, vote, n, min_share)
+    return dict(zip(segs.tolist(), labs.tolist(), strict=True))
 
 
 def _refine(rays, planes, seg, seg_label, pairs: _Pairs, tol_mm, n, rounds: int = 3) -> None:

@@ -1,0 +1,335 @@
+"""Compiled loops (numba) for the hot spots of stripe matching, each the exact loop form of a NumPy
+function it replaces: the same floating-point operations in the same order, so the labels come out to
+the bit. numba compiles on first use and caches the machine code beside this file (or in
+``NUMBA_CACHE_DIR``); where neither is writable it compiles in memory on each start."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}  # numpy: x / 0 is inf or NaN, no exception
+
+
+@njit(**_JIT)
+def _nearest_shifted(key, shift):
+    """For each entry of sorted ``key`` (K,) float64, the index (K,) of the entry nearest ``key + shift``
+    (the lower of a tie) and the distance (K,): ``segments._nearest_key(key, key + shift)``. The targets
+    are sorted too, so one sweep finds every ``np.searchsorted(key, target)`` ('left')."""
+    n = len(key)
+    best = np.empty(n, np.int64)
+    dist = np.empty(n)
+    p = 0
+    prev = -np.inf
+    for i in range(n):
+        t = key[i] + shift
+        if t < prev:  # not sorted after all: search afresh
+            p = np.searchsorted(key, t)
+        prev = t
+        while p < n and key[p] < t:
+            p += 1
+        hi = min(max(p, 1), n - 1)  # clipped as np.clip does
+        lo = hi - 1 if hi > 0 else n - 1  # numpy's key[-1] when the key holds one entry
+        d_lo, d_hi = abs(key[lo] - t), abs(key[hi] - t)
+        if d_hi < d_lo:
+            best[i], dist[i] = hi, d_hi
+        else:
+            best[i], dist[i] = lo, d_lo
+    return best, dist
+
+
+@njit(**_JIT)
+def _root(parent, i):
+    """Root of ``i`` in the union-find forest ``parent`` (M,), halving the path on the way."""
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@njit(**_JIT)
+def link_components(key, link_px):
+    """Component id (M,) per centre in row order, ``key`` (M,) = row * 1e5 + column (sorted): centres one
+    or two rows apart within ``link_px`` (times the gap) columns, mutual nearest, joined; components
+    numbered by their first centre, as scipy's ``connected_components`` numbers them."""
+    m = len(key)
+    parent = np.arange(m)
+    for gap in (1, 2):
+        down, d = _nearest_shifted(key, gap * 1e5)
+        up, _ = _nearest_shifted(key, -gap * 1e5)
+        for a in range(m):
+            b = down[a]
+            # within reach, and mutual: b's nearest in the row above is a
+            if d[a] <= link_px * gap and up[b] == a:
+                ra, rb = _root(parent, a), _root(parent, b)
+                if ra != rb:
+                    parent[max(ra, rb)] = min(ra, rb)
+    comp = np.empty(m, np.int64)
+    label = np.full(m, -1, np.int64)
+    nxt = 0
+    for i in range(m):
+        r = _root(parent, i)
+        if label[r] < 0:
+            label[r] = nxt
+            nxt += 1
+        comp[i] = label[r]
+    return comp
+
+
+@njit(**_JIT)
+def _prefix(x, a, length, out):
+    """``out[:length + 1]`` = np.r_[0, np.cumsum(x[a:a + length])] (sequential sums)."""
+    out[0] = 0.0
+    for j in range(length):
+        out[j + 1] = out[j] + x[a + j]
+
+
+@njit(**_JIT)
+def _slope(cu, cv, cuv, cvv, lo, hi, n):
+    """Least-squares slope du/dv over the window [lo, hi) of running sums (``segments._slopes``)."""
+    su, sv = cu[hi] - cu[lo], cv[hi] - cv[lo]
+    suv, svv = cuv[hi] - cuv[lo], cvv[hi] - cvv[lo]
+    den = n * svv - sv * sv
+    if den > 1e-9:
+        return (n * suv - su * sv) / max(den, 1e-9)
+    return 0.0
+
+
+@njit(**_JIT)
+def _nan_max(a, b):
+    """np.maximum(a, b) for two floats (NaN wins)."""
+    if a != a:
+        return a
+    if b != b:
+        return b
+    return a if a >= b else b
+
+
+@njit(**_JIT)
+def change_cuts(order, starts, logc, u, v, window, log_ratio, slope_change, out, nxt):
+    """``segments.split_at_changes``'s cuts, written into ``out`` (M,) segment ids: each run
+    ``order[starts[r]:starts[r + 1]]`` (centres of one segment, top down) long enough is scored row by
+    row (brightness jump over ``log_ratio``, direction kink over ``slope_change``) and cut greedily, new
+    ids from ``nxt`` in run order. logc, u, v : (M,) float64 log contrast, columns, rows."""
+    longest = 0
+    for r in range(len(starts) - 1):
+        longest = max(longest, starts[r + 1] - starts[r])
+    cs = np.empty(longest + 1)
+    cu = np.empty(longest + 1)
+    cv = np.empty(longest + 1)
+    cuv = np.empty(longest + 1)
+    cvv = np.empty(longest + 1)
+    x = np.empty((5, longest))
+    score = np.empty(longest)
+    w = window
+    nf = float(window)
+    for r in range(len(starts) - 1):
+        a, length = starts[r], starts[r + 1] - starts[r]
+        if length < 2 * w + 2:
+            continue
+        for j in range(length):
+            i = order[a + j]
+            uu, vv = u[i], v[i]
+            x[0, j], x[1, j], x[2, j], x[3, j], x[4, j] = logc[i], uu, vv, uu * vv, vv * vv
+        _prefix(x[0], 0, length, cs)
+        _prefix(x[1], 0, length, cu)
+        _prefix(x[2], 0, length, cv)
+        _prefix(x[3], 0, length, cuv)
+        _prefix(x[4], 0, length, cvv)
+        k = length - 2 * w
+        any_cut = False
+        for j in range(k):
+            before = (cs[w + j] - cs[j]) / w
+            after = (cs[2 * w + j] - cs[w + j]) / w
+            sb = _slope(cu, cv, cuv, cvv, j, w + j, nf)
+            sa = _slope(cu, cv, cuv, cvv, w + j, 2 * w + j, nf)
+            score[j] = _nan_max(abs(after - before) / log_ratio, abs(sa - sb) / slope_change)
+            any_cut |= score[j] >= 1.0
+        if not any_cut:
+            continue
+        j = 0
+        while True:  # greedy: from each score >= 1 the highest within the window, then past it
+            while j < k and not score[j] >= 1.0:
+                j += 1
+            if j >= k:
+                break
+            top = j
+            for q in range(j + 1, min(j + w, k)):  # np.argmax: the first maximum, or the first NaN
+                if score[top] != score[top]:
+                    break
+                if score[q] > score[top] or score[q] != score[q]:
+                    top = q
+            for q in range(a + w + top, a + length):
+                out[order[q]] = nxt
+            nxt += 1
+            j = top + w
+    return nxt
+
+
+@njit(**_JIT)
+def screened_bins(rays, planes, centre, axis, bins, margin, out):
+    """``offsets._bins_on_planes_chunk`` ray by ray: into ``out`` (S, N) int64 the elevation bin of
+    each ray (S, 3) on every light plane (N, 4) by the screened formula, and returns the positions
+    k S + i (U,) int64, sorted, where it is not sure (within ``margin`` of a bin's edge, an ill-conditioned ray or point):
+    those the exact formula must decide. centre (3,) mm, axis (3,) unit: the projector's frame."""
+    s_n, n = out.shape
+    cc = centre[0] * centre[0] + centre[1] * centre[1] + centre[2] * centre[2]
+    ca = centre[0] * axis[0] + centre[1] * axis[1] + centre[2] * axis[2]
+    tau = margin / bins
+    rr, ra, rc, rsize = np.empty(s_n), np.empty(s_n), np.empty(s_n), np.empty(s_n)
+    for i in range(s_n):
+        r0, r1, r2 = rays[i, 0], rays[i, 1], rays[i, 2]
+        rr[i] = r0 * r0 + r1 * r1 + r2 * r2
+        ra[i] = axis[0] * r0 + axis[1] * r1 + axis[2] * r2
+        rc[i] = centre[0] * r0 + centre[1] * r1 + centre[2] * r2
+        rsize[i] = 1e-3 * (abs(r0) + abs(r1) + abs(r2))
+    unsure = np.empty(s_n * n, np.int64)
+    m = 0
+    for k in range(n):  # plane by plane: the unsure ones come out plane-major, as np.flatnonzero of (N, S)
+        p0, p1, p2, d = planes[k, 0], planes[k, 1], planes[k, 2], planes[k, 3]
+        for i in range(s_n):
+            dot = p0 * rays[i, 0] + p1 * rays[i, 1] + p2 * rays[i, 2]
+            size = abs(dot)
+            s = d / dot
+            along = s * ra[i] - ca
+            q2 = (s * rr[i] - 2 * rc[i]) * s + cc  # |s r - c|^2
+            across2 = q2 - along * along
+            f = along / (np.sqrt(across2) * bins)
+            fl = np.floor(f)
+            frac = f - fl
+            if (size > rsize[i] and size > 1e-6 and across2 > 1e-4 * (q2 + cc)
+                    and frac > tau and frac < 1 - tau):
+                out[i, k] = np.int64(fl)
+            else:
+                unsure[m] = k * s_n + i
+                m += 1
+    return unsure[:m]
+
+
+@njit(**_JIT)
+def distinct_cells(rel, rows, sub, offsets, n, deep, most):
+    """``offsets._distinct_cells`` for the centres ``sub`` (S,) with relative stripes ``rel`` (S,) at
+    each offset of ``offsets`` (W,): per offset the number of distinct projector cells (stripe
+    rel + offset in [0, n), elevation bin ``rows[sub, stripe]``) and how many of them are keys of the
+    sorted ``deep`` (stripe * 1e6 + bin). rows : (M, N) int64 elevation bins (``BinTable``). Returns
+    cells (W,), hits (W,) and False when the bins span more than ``most`` cells (nothing counted)."""
+    w_n = len(offsets)
+    cells = np.zeros(w_n, np.int64)
+    hits = np.zeros(w_n, np.int64)
+    order = np.argsort(rel, kind="mergesort")
+    lo, hi = np.iinfo(np.int64).max, np.iinfo(np.int64).min
+    for i in range(len(sub)):
+        row = sub[i]
+        for w in range(w_n):
+            k = rel[i] + offsets[w]
+            if 0 <= k < n:
+                e = rows[row, k]
+                lo, hi = min(lo, e), max(hi, e)
+    if hi < lo:
+        return cells, hits, True
+    span = hi - lo + 1
+    if not (lo > -400_000 and hi < 400_000) or n * span > most:
+        return cells, hits, False
+    in_deep = np.zeros(n * span, np.bool_)
+    for key in deep:
+        dk = (key + 500_000) // 1_000_000  # keys of bins within +-5e5 split back into stripe and bin
+        de = key - dk * 1_000_000 - lo
+        if 0 <= dk < n and 0 <= de < span:
+            in_deep[dk * span + de] = True
+    # a cell at one offset comes from one relative stripe only: counted once per group of equal rel
+    stamp = np.full(n * span, -1, np.int64)
+    group = -1
+    for j in range(len(order)):
+        i = order[j]
+        if j == 0 or rel[i] != rel[order[j - 1]]:
+            group += 1
+        row = sub[i]
+        for w in range(w_n):
+            k = rel[i] + offsets[w]
+            if 0 <= k < n:
+                cell = k * span + rows[row, k] - lo
+                if stamp[cell] != group:
+                    stamp[cell] = group
+                    cells[w] += 1
+                    hits[w] += in_deep[cell]
+    return cells, hits, True
+
+
+@njit(**_JIT)
+def _depth(rays, i, planes, k):
+    """``triangulation.depth_on`` of ray i on plane k (mm): n . r summed as np.einsum sums three terms
+    ((x + z) + y), NaN where the ray is parallel to the plane."""
+    denom = (rays[i, 0] * planes[k, 0] + rays[i, 2] * planes[k, 2]) + rays[i, 1] * planes[k, 1]
+    s = planes[k, 3] / denom
+    if abs(denom) < 1e-9:
+        s = np.nan
+    return rays[i, 2] * s
+
+
+@njit(**_JIT)
+def voting_pairs(own_seg, nb_seg, table, active, relabel):
+    """Positions (K,) of the pairs (own segments, neighbour segments (P,)) that vote: own segment
+    flagged in ``active`` (S,), unlabelled in ``table`` (S,) (labelled with ``relabel``), neighbour's
+    labelled."""
+    out = np.empty(len(own_seg), np.int64)
+    m = 0
+    for p in range(len(own_seg)):
+        if active[own_seg[p]] and table[nb_seg[p]] >= 0 and (table[own_seg[p]] >= 0) == relabel:
+            out[m] = p
+            m += 1
+    return out[:m]
+
+
+@njit(**_JIT)
+def depth_votes(rays, planes, table, cols, at, gaps, tol_mm, n, penalty_mm, step):
+    """The label (K,) each voting pair ``cols[:, at]`` (``matching._Pairs`` rows) casts by depth
+    continuity: the neighbour's label stepped by each gap (toward the voter) whose plane puts the voter
+    nearest the neighbour's depth (extrapolated by ``step`` (K,) mm per stripe when given, else
+    empty), a wider gap paying ``penalty_mm`` per extra stripe; -1 where none is within ``tol_mm``."""
+    best = np.full(len(at), -1, np.int64)
+    for q in range(len(at)):
+        p = at[q]
+        idx, nbr, sign = cols[0, p], cols[1, p], cols[2, p]
+        kn = table[cols[4, p]]
+        zn = _depth(rays, nbr, planes, kn)
+        best_d = np.inf
+        for gap in gaps:
+            k = kn + sign * gap
+            ref = zn + step[q] * gap if len(step) else zn
+            d = abs(_depth(rays, idx, planes, min(max(k, 0), n - 1)) - ref)
+            d = d + (gap - 1) * penalty_mm
+            if 0 <= k < n and d < best_d and d < tol_mm:
+                best[q], best_d = k, d
+    return best
+
+
+@njit(**_JIT)
+def majority(voter, vote, n, min_share):
+    """``matching._majority`` as arrays: segments (G,) and labels (G,) of the segments whose most frequent
+    vote (the earliest cast of a tie) has at least 3 votes and ``min_share`` of their voters, in the
+    order the segments first got a vote. voter : (V,) segment ids; vote : (V,) labels, -1 for none."""
+    support = np.bincount(voter)
+    cast = np.flatnonzero(vote >= 0)
+    key = voter[cast] * (n + 1) + vote[cast]
+    order = np.argsort(key, kind="mergesort")  # stable: a run's first entry was cast first
+    segs = np.empty(len(cast), np.int64)
+    labs = np.empty(len(cast), np.int64)
+    firsts = np.empty(len(cast), np.int64)
+    m = 0
+    j = 0
+    while j < len(order):
+        seg = key[order[j]] // (n + 1)
+        top_cnt, top_lab, top_first, seg_first = 0, -1, 0, len(cast)
+        while j < len(order) and key[order[j]] // (n + 1) == seg:  # the runs of one segment, labels rising
+            a = j
+            while j < len(order) and key[order[j]] == key[order[a]]:
+                j += 1
+            cnt, first = j - a, order[a]
+            seg_first = min(seg_first, first)
+            if cnt > top_cnt or (cnt == top_cnt and first < top_first):
+                top_cnt, top_lab, top_first = cnt, key[order[a]] % (n + 1), first
+        if top_cnt >= 3 and top_cnt >= min_share * support[seg]:
+            segs[m], labs[m], firsts[m] = seg, top_lab, seg_first
+            m += 1
+    by_first = np.argsort(firsts[:m])
+    return segs[:m][by_first], labs[:m][by_first]
