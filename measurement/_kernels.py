@@ -1,17 +1,37 @@
 """Compiled loops (numba) for the hot spots of stripe matching, each the exact loop form of a NumPy
-function it replaces: the same floating-point operations in the same order, so the labels come out to
-the bit. numba compiles on first use and caches the machine code beside this file (or in
-``NUMBA_CACHE_DIR``); where neither is writable it compiles in memory on each start."""
+function it replaces: the same floating-point operations in the same order (np.einsum sums three
+products as (x + z) + y), or a screened formula that leaves to the exact NumPy one every case rounding
+could decide, so the labels come out to the bit.
+
+numba compiles a kernel on its first call (a few seconds for all of them) and caches the machine code
+in ``__pycache__`` beside this file, else in ``NUMBA_CACHE_DIR`` or the user's cache directory; where
+none is writable the kernels are compiled in memory on each start."""
 
 from __future__ import annotations
+
+import logging
 
 import numpy as np
 from numba import njit
 
-_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}  # numpy: x / 0 is inf or NaN, no exception
+_log = logging.getLogger(__name__)
+_OPTIONS = {"nogil": True, "error_model": "numpy"}  # numpy: x / 0 is inf or NaN, no exception
+_UNCACHED: list[str] = []  # kernels compiled without a cache
 
 
-@njit(**_JIT)
+def _jit(fn):
+    """``njit`` with an on-disk cache when numba finds a writable place for one."""
+    try:
+        return njit(cache=True, **_OPTIONS)(fn)
+    except RuntimeError:  # numba: "cannot cache function ...: no locator available"
+        if not _UNCACHED:
+            _log.warning("numba finds no writable cache directory for %s: the kernels compile on each start "
+                         "(set NUMBA_CACHE_DIR)", __file__)
+        _UNCACHED.append(fn.__name__)
+        return njit(**_OPTIONS)(fn)
+
+
+@_jit
 def _nearest_shifted(key, shift):
     """For each entry of sorted ``key`` (K,) float64, the index (K,) of the entry nearest ``key + shift``
     (the lower of a tie) and the distance (K,): ``segments._nearest_key(key, key + shift)``. The targets
@@ -38,7 +58,7 @@ def _nearest_shifted(key, shift):
     return best, dist
 
 
-@njit(**_JIT)
+@_jit
 def _root(parent, i):
     """Root of ``i`` in the union-find forest ``parent`` (M,), halving the path on the way."""
     while parent[i] != i:
@@ -47,7 +67,7 @@ def _root(parent, i):
     return i
 
 
-@njit(**_JIT)
+@_jit
 def link_components(key, link_px):
     """Component id (M,) per centre in row order, ``key`` (M,) = row * 1e5 + column (sorted): centres one
     or two rows apart within ``link_px`` (times the gap) columns, mutual nearest, joined; components
@@ -76,7 +96,7 @@ def link_components(key, link_px):
     return comp
 
 
-@njit(**_JIT)
+@_jit
 def _prefix(x, a, length, out):
     """``out[:length + 1]`` = np.r_[0, np.cumsum(x[a:a + length])] (sequential sums)."""
     out[0] = 0.0
@@ -84,7 +104,7 @@ def _prefix(x, a, length, out):
         out[j + 1] = out[j] + x[a + j]
 
 
-@njit(**_JIT)
+@_jit
 def _slope(cu, cv, cuv, cvv, lo, hi, n):
     """Least-squares slope du/dv over the window [lo, hi) of running sums (``segments._slopes``)."""
     su, sv = cu[hi] - cu[lo], cv[hi] - cv[lo]
@@ -95,7 +115,7 @@ def _slope(cu, cv, cuv, cvv, lo, hi, n):
     return 0.0
 
 
-@njit(**_JIT)
+@_jit
 def _nan_max(a, b):
     """np.maximum(a, b) for two floats (NaN wins)."""
     if a != a:
@@ -105,7 +125,7 @@ def _nan_max(a, b):
     return a if a >= b else b
 
 
-@njit(**_JIT)
+@_jit
 def change_cuts(order, starts, logc, u, v, window, log_ratio, slope_change, out, nxt):
     """``segments.split_at_changes``'s cuts, written into ``out`` (M,) segment ids: each run
     ``order[starts[r]:starts[r + 1]]`` (centres of one segment, top down) long enough is scored row by
@@ -166,7 +186,7 @@ def change_cuts(order, starts, logc, u, v, window, log_ratio, slope_change, out,
     return nxt
 
 
-@njit(**_JIT)
+@_jit
 def screened_bins(rays, planes, centre, axis, bins, margin, out):
     """``offsets._bins_on_planes_chunk`` ray by ray: into ``out`` (S, N) int64 the elevation bin of
     each ray (S, 3) on every light plane (N, 4) by the screened formula, and returns the positions
@@ -206,7 +226,7 @@ def screened_bins(rays, planes, centre, axis, bins, margin, out):
     return unsure[:m]
 
 
-@njit(**_JIT)
+@_jit
 def distinct_cells(rel, rows, sub, offsets, n, deep, most):
     """``offsets._distinct_cells`` for the centres ``sub`` (S,) with relative stripes ``rel`` (S,) at
     each offset of ``offsets`` (W,): per offset the number of distinct projector cells (stripe
@@ -255,7 +275,7 @@ def distinct_cells(rel, rows, sub, offsets, n, deep, most):
     return cells, hits, True
 
 
-@njit(**_JIT)
+@_jit
 def _depth(rays, i, planes, k):
     """``triangulation.depth_on`` of ray i on plane k (mm): n . r summed as np.einsum sums three terms
     ((x + z) + y), NaN where the ray is parallel to the plane."""
@@ -266,7 +286,7 @@ def _depth(rays, i, planes, k):
     return rays[i, 2] * s
 
 
-@njit(**_JIT)
+@_jit
 def voting_pairs(own_seg, nb_seg, table, active, relabel):
     """Positions (K,) of the pairs (own segments, neighbour segments (P,)) that vote: own segment
     flagged in ``active`` (S,), unlabelled in ``table`` (S,) (labelled with ``relabel``), neighbour's
@@ -280,7 +300,7 @@ def voting_pairs(own_seg, nb_seg, table, active, relabel):
     return out[:m]
 
 
-@njit(**_JIT)
+@_jit
 def depth_votes(rays, planes, table, cols, at, gaps, tol_mm, n, penalty_mm, step):
     """The label (K,) each voting pair ``cols[:, at]`` (``matching._Pairs`` rows) casts by depth
     continuity: the neighbour's label stepped by each gap (toward the voter) whose plane puts the voter
@@ -303,7 +323,7 @@ def depth_votes(rays, planes, table, cols, at, gaps, tol_mm, n, penalty_mm, step
     return best
 
 
-@njit(**_JIT)
+@_jit
 def majority(voter, vote, n, min_share):
     """``matching._majority`` as arrays: segments (G,) and labels (G,) of the segments whose most frequent
     vote (the earliest cast of a tie) has at least 3 votes and ``min_share`` of their voters, in the
@@ -333,3 +353,108 @@ def majority(voter, vote, n, min_share):
             m += 1
     by_first = np.argsort(firsts[:m])
     return segs[:m][by_first], labs[:m][by_first]
+
+
+@_jit
+def _median5(a, b, c, d, e):
+    """The median of five floats (finite): the larger of the two smaller of the first four's pairs and
+    the smaller of their larger, then the median of those two and e (the value a sort would pick)."""
+    lo = max(min(a, b), min(c, d))
+    hi = min(max(a, b), max(c, d))
+    return max(min(lo, hi), min(max(lo, hi), e))
+
+
+@_jit
+def smooth_runs(order, starts, u, half, outlier_px, out, keep):
+    """``segments.smooth_along_segments`` run by run: each run ``order[starts[r]:starts[r + 1]]`` (one
+    segment's centres, top down) at least 2 ``half`` + 1 long gets into ``out`` (M,) its columns ``u``
+    (M,) px averaged over +-``half`` rows (edges repeated), a column more than ``outlier_px`` off the
+    median of its window replaced by that median and flagged False in ``keep`` (M,). The sums run as
+    np.cumsum runs them over the edge-padded run, so they round alike."""
+    win = 2 * half + 1
+    longest = 0
+    for r in range(len(starts) - 1):
+        longest = max(longest, starts[r + 1] - starts[r])
+    xp = np.empty(longest + 2 * half)
+    good = np.empty(longest + 2 * half)
+    cs = np.empty(longest + 2 * half + 1)
+    for r in range(len(starts) - 1):
+        a, length = starts[r], starts[r + 1] - starts[r]
+        if length < win:
+            continue
+        for t in range(length + 2 * half):
+            xp[t] = u[order[a + min(max(t - half, 0), length - 1)]]
+        for j in range(length):
+            if win == 5:
+                med = _median5(xp[j], xp[j + 1], xp[j + 2], xp[j + 3], xp[j + 4])
+            else:
+                med = np.sort(xp[j:j + win])[half]
+            x = xp[j + half]
+            if abs(x - med) > outlier_px:
+                good[j] = med
+                keep[order[a + j]] = False
+            else:
+                good[j] = x
+        cs[0] = 0.0
+        for t in range(length + 2 * half):
+            cs[t + 1] = cs[t] + good[min(max(t - half, 0), length - 1)]
+        for j in range(length):
+            out[order[a + j]] = (cs[j + win] - cs[j]) / win
+
+
+@_jit
+def near_any_plane(rays, planes, bg_planes, tol_mm, near):
+    """Into ``near`` (m, N) bool: whether ray i's point on light plane k (N, 4) lies within ``tol_mm``
+    of a background plane (P, 4), screened as |z (ray . n) - d|; returns the positions i N + k (U,)
+    where rounding could decide (within 1e-6 mm of ``tol_mm``, |z| >= 1e5 or not finite), which the
+    exact formula (``background._near_exact``) must settle."""
+    m, n = near.shape
+    unsure = np.empty(m * n, np.int64)
+    u = 0
+    along = np.empty(len(bg_planes))
+    for i in range(m):
+        r0, r1, r2 = rays[i, 0], rays[i, 1], rays[i, 2]
+        for p in range(len(bg_planes)):
+            along[p] = r0 * bg_planes[p, 0] + r1 * bg_planes[p, 1] + r2 * bg_planes[p, 2]
+        for k in range(n):
+            z = planes[k, 3] / (r0 * planes[k, 0] + r1 * planes[k, 1] + r2 * planes[k, 2])
+            d = np.inf
+            for p in range(len(bg_planes)):
+                g = abs(z * along[p] - bg_planes[p, 3])
+                if g < d:  # NaN skipped, as np.fmin skips it
+                    d = g
+            near[i, k] = d < tol_mm
+            if not (abs(d - tol_mm) > 1e-6 and abs(z) < 1e5):
+                unsure[u] = i * n + k
+                u += 1
+    return unsure[:u]
+
+
+@_jit
+def group_counts(flags, starts):
+    """Per group (G,) of rows ``starts[g]:starts[g + 1]`` of ``flags`` (K, N) bool: the True count per
+    column, (G, N) int64 (``np.add.reduceat`` with the rows' end closing the last group)."""
+    g_n, n = len(starts) - 1, flags.shape[1]
+    out = np.zeros((g_n, n), np.int64)
+    for g in range(g_n):
+        for i in range(starts[g], starts[g + 1]):
+            for k in range(n):
+                out[g, k] += flags[i, k]
+    return out
+
+
+@_jit
+def rays_at(u, v, table):
+    """``triangulation.rays_at``: rays (M, 3) z = 1 through columns ``u`` (M,) float64 of rows ``v``
+    (M,), linearly interpolated along the rows of ``table`` (H, W, 2) float32."""
+    w = table.shape[1]
+    out = np.empty((len(u), 3))
+    for i in range(len(u)):
+        u0 = min(max(np.int64(np.floor(u[i])), 0), w - 2)
+        f = u[i] - u0
+        g = 1 - f
+        row = v[i]
+        for j in range(2):
+            out[i, j] = np.float64(table[row, u0, j]) * g + np.float64(table[row, u0 + 1, j]) * f
+        out[i, 2] = 1.0
+    return out

@@ -74,28 +74,6 @@ def _runs(keys: np.ndarray) -> np.ndarray:
     return np.r_[0, np.nonzero(keys[1:] != keys[:-1])[0] + 1, len(keys)]
 
 
-def _length_buckets(lengths: np.ndarray):
-    """Indices of runs grouped by length within a factor of two, so that each group pads into one
-    (runs, longest) array without wasting much."""
-    level = np.floor(np.log2(np.maximum(lengths, 1))).astype(np.int64)
-    for lv in np.unique(level):
-        yield np.nonzero(level == lv)[0]
-
-
-def _gather(order: np.ndarray, starts: np.ndarray, lengths: np.ndarray, pos: np.ndarray
-            ) -> tuple[np.ndarray, np.ndarray]:
-    """Element indices (R, K) at positions ``pos`` (K,) of runs ``order[start:start + length]``, a
-    position outside a run clamped to its ends (edge padding), and where it was inside (R, K)."""
-    at = np.clip(pos[None, :], 0, lengths[:, None] - 1)
-    return order[starts[:, None] + at], (pos[None, :] >= 0) & (pos[None, :] < lengths[:, None])
-
-
-def _padded_cumsum(x: np.ndarray) -> np.ndarray:
-    """Running sums (R, L + 1) of the rows of x (R, L), each from 0: per row exactly ``np.r_[0,
-    np.cumsum(row)]`` (accumulation is sequential, so the sums round as they would one run at a time)."""
-    return np.cumsum(np.concatenate([np.zeros((len(x), 1)), x], axis=1), axis=1)
-
-
 def row_neighbours(c: Centres, order: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Index of the left and right neighbour of each centre in its row (-1 at the row's ends).
     order : row_order(c), if known"""
@@ -122,36 +100,5 @@ def smooth_along_segments(c: Centres, segment: np.ndarray, labels: np.ndarray, h
     if len(idx) == 0:
         return u, keep
     order = idx[np.lexsort((c.v[idx], segment[idx]))]
-    starts = _runs(segment[order])
-    lengths = np.diff(starts)
-    win = 2 * half + 1
-    runs = np.nonzero(lengths >= win)[0]
-    for group in _length_buckets(lengths[runs]):
-        n_rows = lengths[runs[group]]
-        first = starts[runs[group]]
-        width = int(n_rows.max())
-        ids, valid = _gather(order, first, n_rows, np.arange(width))
-        padded, _ = _gather(order, first, n_rows, np.arange(-half, width + half))
-        xp = c.u[padded]  # edge-padded columns, (R, width + 2 half)
-        x = xp[:, half:half + width]
-        med = _window_median(xp, win, width)
-        bad = np.abs(x - med) > outlier_px
-        good = np.where(bad, med, x)
-        at = np.clip(np.arange(-half, width + half)[None, :], 0, n_rows[:, None] - 1)
-        cs = _padded_cumsum(np.take_along_axis(good, at, axis=1))
-        u[ids[valid]] = ((cs[:, win:win + width] - cs[:, :width]) / win)[valid]
-        keep[ids[valid & bad]] = False
+    _kernels.smooth_runs(order, _runs(segment[order]), c.u, half, outlier_px, u, keep)
     return u, keep
-
-
-def _window_median(xp: np.ndarray, win: int, width: int) -> np.ndarray:
-    """Median (R, width) of each run of ``win`` (odd) columns of xp (R, width + win - 1)."""
-    cols = [xp[:, j:j + width] for j in range(win)]
-    if win != 5:
-        return np.sort(np.stack(cols, axis=2), axis=2)[:, :, win // 2]
-    # five values: drop the smallest and the largest of the first four, take the median of three (a
-    # selection network: the result is one of the inputs, exactly as a sort would pick it)
-    a, b, c, d, e = cols
-    lo = np.maximum(np.minimum(a, b), np.minimum(c, d))
-    hi = np.minimum(np.maximum(a, b), np.maximum(c, d))
-    return np.maximum(np.minimum(lo, hi), np.minimum(np.maximum(lo, hi), e))
