@@ -441,20 +441,3 @@ def group_counts(flags, starts):
             for k in range(n):
                 out[g, k] += flags[i, k]
     return out
-
-
-@_jit
-def rays_at(u, v, table):
-    """``triangulation.rays_at``: rays (M, 3) z = 1 through columns ``u`` (M,) float64 of rows ``v``
-    (M,), linearly interpolated along the rows of ``table`` (H, W, 2) float32."""
-    w = table.shape[1]
-    out = np.empty((len(u), 3))
-    for i in range(len(u)):
-        u0 = min(max(np.int64(np.floor(u[i])), 0), w - 2)
-        f = u[i] - u0
-        g = 1 - f
-        row = v[i]
-        for j in range(2):
-            out[i, j] = np.float64(table[row, u0, j]) * g + np.float64(table[row, u0 + 1, j]) * f
-        out[i, 2] = 1.0
-    return out

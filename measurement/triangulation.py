@@ -8,7 +8,6 @@ from functools import lru_cache
 
 import numpy as np
 
-from . import _kernels
 from .camera import Intrinsics, ray_grid
 
 
@@ -30,7 +29,19 @@ def ray_table(intr: Intrinsics) -> np.ndarray:
 def rays_at(u: np.ndarray, v: np.ndarray, table: np.ndarray) -> np.ndarray:
     """Rays (M, 3) with z = 1 through sub-pixel columns ``u`` (M,) of integer rows ``v`` (M,), by linear
     interpolation along the row of the ray table (rows are exact)."""
-    return _kernels.rays_at(np.asarray(u, np.float64), np.asarray(v, np.int64), table)
+    w = table.shape[1]
+    u0 = np.clip(np.floor(u).astype(np.int64), 0, w - 2)
+    f = u - u0
+    # one flat index and take(): several times faster than indexing the (H, W, 2) table by (v, u0)
+    flat = table.reshape(-1, 2)
+    i = np.asarray(v, np.int64) * w + u0
+    t0, t1 = flat.take(i, axis=0), flat.take(i + 1, axis=0)
+    out = np.empty((len(u), 3))
+    g = 1 - f
+    out[:, 0] = t0[:, 0] * g + t1[:, 0] * f
+    out[:, 1] = t0[:, 1] * g + t1[:, 1] * f
+    out[:, 2] = 1.0
+    return out
 
 
 def intersect(rays: np.ndarray, planes: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
