@@ -232,23 +232,26 @@ def distinct_cells(rel, rows, sub, offsets, n, deep, most):
     each offset of ``offsets`` (W,): per offset the number of distinct projector cells (stripe
     rel + offset in [0, n), elevation bin ``rows[sub, stripe]``) and how many of them are keys of the
     sorted ``deep`` (stripe * 1e6 + bin). rows : (M, N) int64 elevation bins (``BinTable``). Returns
-    cells (W,), hits (W,) and False when the bins span more than ``most`` cells (nothing counted)."""
+    cells (W,), hits (W,) and False (nothing counted) when a bitmap of the cells of every offset would
+    take more than ``most`` bytes."""
     w_n = len(offsets)
     cells = np.zeros(w_n, np.int64)
     hits = np.zeros(w_n, np.int64)
-    order = np.argsort(rel, kind="mergesort")
+    if w_n == 0 or len(sub) == 0:
+        return cells, hits, True
+    first, last = offsets.min(), offsets.max()
+    # the bins' range over each centre's stripes from the first to the last offset (a superset when the
+    # offsets skip some: it only sizes the bitmap); runs along a table row are read in one sweep
     lo, hi = np.iinfo(np.int64).max, np.iinfo(np.int64).min
     for i in range(len(sub)):
-        row = sub[i]
-        for w in range(w_n):
-            k = rel[i] + offsets[w]
-            if 0 <= k < n:
-                e = rows[row, k]
-                lo, hi = min(lo, e), max(hi, e)
+        row = rows[sub[i]]
+        for k in range(max(rel[i] + first, 0), min(rel[i] + last + 1, n)):
+            lo = min(lo, row[k])
+            hi = max(hi, row[k])
     if hi < lo:
         return cells, hits, True
     span = hi - lo + 1
-    if not (lo > -400_000 and hi < 400_000) or n * span > most:
+    if not (lo > -400_000 and hi < 400_000) or w_n * n * span > most:
         return cells, hits, False
     in_deep = np.zeros(n * span, np.bool_)
     for key in deep:
@@ -256,20 +259,18 @@ def distinct_cells(rel, rows, sub, offsets, n, deep, most):
         de = key - dk * 1_000_000 - lo
         if 0 <= dk < n and 0 <= de < span:
             in_deep[dk * span + de] = True
-    # a cell at one offset comes from one relative stripe only: counted once per group of equal rel
-    stamp = np.full(n * span, -1, np.int64)
-    group = -1
-    for j in range(len(order)):
-        i = order[j]
-        if j == 0 or rel[i] != rel[order[j - 1]]:
-            group += 1
-        row = sub[i]
-        for w in range(w_n):
-            k = rel[i] + offsets[w]
-            if 0 <= k < n:
-                cell = k * span + rows[row, k] - lo
-                if stamp[cell] != group:
-                    stamp[cell] = group
+    which = np.full(last - first + 1, -1, np.int64)  # offset - first -> its position in offsets
+    for w in range(w_n):
+        which[offsets[w] - first] = w
+    mark = np.zeros((w_n, n * span), np.bool_)  # the cells of each offset
+    for i in range(len(sub)):
+        row = rows[sub[i]]
+        for k in range(max(rel[i] + first, 0), min(rel[i] + last + 1, n)):
+            w = which[k - rel[i] - first]
+            if w >= 0:
+                cell = k * span + row[k] - lo
+                if not mark[w, cell]:
+                    mark[w, cell] = True
                     cells[w] += 1
                     hits[w] += in_deep[cell]
     return cells, hits, True
@@ -440,4 +441,55 @@ def group_counts(flags, starts):
         for i in range(starts[g], starts[g + 1]):
             for k in range(n):
                 out[g, k] += flags[i, k]
+    return out
+
+
+@_jit
+def segment_steps(seg, rays, planes, table, nb, sign, measured, tol_mm, min_rows):
+    """``matching._segment_steps`` for one side: the mean depth step (S,) mm from each centre's row
+    neighbour ``nb`` (M,) (-1 for none) on the next stripe toward ``sign`` to the centre, per segment
+    flagged in ``measured`` (S,); NaN where fewer than ``min_rows`` rows measure one within 2 ``tol_mm``.
+    The steps are summed centre by centre in index order, as np.bincount sums its weights."""
+    cnt = np.zeros(len(table), np.int64)
+    tot = np.zeros(len(table))
+    for i in range(len(seg)):
+        s = seg[i]
+        f = nb[i]
+        if not measured[s] or f < 0:
+            continue
+        k, kf = table[s], table[seg[f]]
+        if kf != k - sign or kf < 0:
+            continue
+        step = _depth(rays, i, planes, k) - _depth(rays, f, planes, kf)
+        if abs(step) < 2 * tol_mm:
+            cnt[s] += 1
+            tot[s] += step
+    out = np.empty(len(table))
+    for s in range(len(table)):
+        out[s] = tot[s] / max(cnt[s], 1) if cnt[s] >= min_rows else np.nan
+    return out
+
+
+@_jit
+def flag_beside(own_seg, nb_seg, flags):
+    """(S,) the segments ``own_seg`` (P,) of the pairs whose neighbour's segment ``nb_seg`` (P,) is
+    flagged in ``flags`` (S,)."""
+    out = np.zeros(len(flags), np.bool_)
+    for p in range(len(own_seg)):
+        if flags[nb_seg[p]]:
+            out[own_seg[p]] = True
+    return out
+
+
+@_jit
+def flag_touching(seg, left, right, flags):
+    """(S,) the segments flagged in ``flags`` (S,) and those with a centre beside one of theirs in its
+    row (``left``, ``right`` (M,): row neighbours, -1 for none)."""
+    out = flags.copy()
+    for i in range(len(seg)):
+        if flags[seg[i]]:
+            if left[i] >= 0:
+                out[seg[left[i]]] = True
+            if right[i] >= 0:
+                out[seg[right[i]]] = True
     return out

@@ -536,20 +536,8 @@ def _segment_steps(seg, rays, planes, table, left, right, tol_mm,
     measured = table >= 0
     if since is not None:
         measured &= since[1]
-    idx = np.flatnonzero(measured[seg])
-    k = table[seg[idx]]
-    z = depth_on(rays.take(idx, axis=0), planes.take(k, axis=0))
     for sign, nb in ((1, left), (-1, right)):
-        f = nb[idx]
-        has = f >= 0
-        kf = np.where(has, table[seg[np.maximum(f, 0)]], -1)
-        ok = has & (kf == k - sign) & (kf >= 0)
-        step = np.zeros(len(idx))
-        step[ok] = z[ok] - depth_on(rays.take(f[ok], axis=0), planes.take(kf[ok], axis=0))
-        ok &= np.abs(step) < 2 * tol_mm
-        cnt = np.bincount(seg[idx[ok]], minlength=len(table))
-        tot = np.bincount(seg[idx[ok]], weights=step[ok], minlength=len(table))
-        out[sign] = np.where(cnt >= min_rows, tot / np.maximum(cnt, 1), np.nan)
+        out[sign] = _kernels.segment_steps(seg, rays, planes, table, nb, sign, measured, tol_mm, min_rows)
         if since is not None:
             out[sign] = np.where(since[1], out[sign], since[0][sign])
     return out
@@ -557,11 +545,7 @@ def _segment_steps(seg, rays, planes, table, left, right, tol_mm,
 
 def _touching(seg: np.ndarray, left: np.ndarray, right: np.ndarray, flags: np.ndarray) -> np.ndarray:
     """(S,) the segments flagged in ``flags`` (S,) and those with a centre beside one of theirs in its row."""
-    out = flags.copy()
-    members = np.flatnonzero(flags[seg])
-    for nb in (left[members], right[members]):
-        out[seg[nb[nb >= 0]]] = True
-    return out
+    return _kernels.flag_touching(seg, left, right, flags)
 
 
 def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
@@ -642,9 +626,7 @@ def _open_pairs(pairs: _Pairs, table: np.ndarray) -> _Pairs:
 
 def _beside(pairs: _Pairs, flags: np.ndarray) -> np.ndarray:
     """(S,) the own segments of the ``pairs`` whose neighbour's segment is flagged in ``flags`` (S,)."""
-    out = np.zeros(len(flags), bool)
-    out[pairs.own_seg[flags[pairs.nb_seg]]] = True
-    return out
+    return _kernels.flag_beside(pairs.own_seg, pairs.nb_seg, flags)
 
 
 def _label_table(seg: np.ndarray, seg_label: dict[int, int]) -> np.ndarray:
