@@ -196,19 +196,22 @@ def screened_bins(rays, planes, centre, axis, bins, margin, out):
     cc = centre[0] * centre[0] + centre[1] * centre[1] + centre[2] * centre[2]
     ca = centre[0] * axis[0] + centre[1] * axis[1] + centre[2] * axis[2]
     tau = margin / bins
+    # the rays' columns apart (unit-stride loads for the vector lanes) and their per-ray terms
+    r0, r1, r2 = np.empty(s_n), np.empty(s_n), np.empty(s_n)
     rr, ra, rc, rsize = np.empty(s_n), np.empty(s_n), np.empty(s_n), np.empty(s_n)
     for i in range(s_n):
-        r0, r1, r2 = rays[i, 0], rays[i, 1], rays[i, 2]
-        rr[i] = r0 * r0 + r1 * r1 + r2 * r2
-        ra[i] = axis[0] * r0 + axis[1] * r1 + axis[2] * r2
-        rc[i] = centre[0] * r0 + centre[1] * r1 + centre[2] * r2
-        rsize[i] = 1e-3 * (abs(r0) + abs(r1) + abs(r2))
+        r0[i], r1[i], r2[i] = rays[i, 0], rays[i, 1], rays[i, 2]
+        rr[i] = r0[i] * r0[i] + r1[i] * r1[i] + r2[i] * r2[i]
+        ra[i] = axis[0] * r0[i] + axis[1] * r1[i] + axis[2] * r2[i]
+        rc[i] = centre[0] * r0[i] + centre[1] * r1[i] + centre[2] * r2[i]
+        rsize[i] = 1e-3 * (abs(r0[i]) + abs(r1[i]) + abs(r2[i]))
     unsure = np.empty(s_n * n, np.int64)
     m = 0
+    floor, sure = np.empty(s_n), np.empty(s_n, np.bool_)
     for k in range(n):  # plane by plane: the unsure ones come out plane-major, as np.flatnonzero of (N, S)
         p0, p1, p2, d = planes[k, 0], planes[k, 1], planes[k, 2], planes[k, 3]
-        for i in range(s_n):
-            dot = p0 * rays[i, 0] + p1 * rays[i, 1] + p2 * rays[i, 2]
+        for i in range(s_n):  # no branch: the loop runs on vector lanes (IEEE operations all the same)
+            dot = p0 * r0[i] + p1 * r1[i] + p2 * r2[i]
             size = abs(dot)
             s = d / dot
             along = s * ra[i] - ca
@@ -217,9 +220,12 @@ def screened_bins(rays, planes, centre, axis, bins, margin, out):
             f = along / (np.sqrt(across2) * bins)
             fl = np.floor(f)
             frac = f - fl
-            if (size > rsize[i] and size > 1e-6 and across2 > 1e-4 * (q2 + cc)
-                    and frac > tau and frac < 1 - tau):
-                out[i, k] = np.int64(fl)
+            floor[i] = fl
+            sure[i] = ((size > rsize[i]) & (size > 1e-6) & (across2 > 1e-4 * (q2 + cc)) & (frac > tau)
+                       & (frac < 1 - tau))
+        for i in range(s_n):
+            if sure[i]:
+                out[i, k] = np.int64(floor[i])
             else:
                 unsure[m] = k * s_n + i
                 m += 1
@@ -406,26 +412,29 @@ def smooth_runs(order, starts, u, half, outlier_px, out, keep):
 @_jit
 def near_any_plane(rays, planes, bg_planes, tol_mm, near):
     """Into ``near`` (m, N) bool: whether ray i's point on light plane k (N, 4) lies within ``tol_mm``
-    of a background plane (P, 4), screened as |z (ray . n) - d|; returns the positions i N + k (U,)
-    where rounding could decide (within 1e-6 mm of ``tol_mm``, |z| >= 1e5 or not finite), which the
-    exact formula (``background._near_exact``) must settle."""
+    of a background plane (P, 4), screened as |z (ray . n) - d|; returns the positions i N + k (U,),
+    sorted, where rounding could decide (within 1e-6 mm of ``tol_mm``, |z| >= 1e5 or not finite),
+    which the exact formula (``background._near_exact``) must settle."""
     m, n = near.shape
     unsure = np.empty(m * n, np.int64)
     u = 0
-    along = np.empty(len(bg_planes))
+    # the planes' columns apart: each ray's loop over the planes runs on vector lanes
+    p0, p1 = np.ascontiguousarray(planes[:, 0]), np.ascontiguousarray(planes[:, 1])
+    p2, p3 = np.ascontiguousarray(planes[:, 2]), np.ascontiguousarray(planes[:, 3])
+    d, z = np.empty(n), np.empty(n)
     for i in range(m):
         r0, r1, r2 = rays[i, 0], rays[i, 1], rays[i, 2]
-        for p in range(len(bg_planes)):
-            along[p] = r0 * bg_planes[p, 0] + r1 * bg_planes[p, 1] + r2 * bg_planes[p, 2]
         for k in range(n):
-            z = planes[k, 3] / (r0 * planes[k, 0] + r1 * planes[k, 1] + r2 * planes[k, 2])
-            d = np.inf
-            for p in range(len(bg_planes)):
-                g = abs(z * along[p] - bg_planes[p, 3])
-                if g < d:  # NaN skipped, as np.fmin skips it
-                    d = g
-            near[i, k] = d < tol_mm
-            if not (abs(d - tol_mm) > 1e-6 and abs(z) < 1e5):
+            z[k] = p3[k] / (r0 * p0[k] + r1 * p1[k] + r2 * p2[k])
+            d[k] = np.inf
+        for b in range(len(bg_planes)):
+            along = r0 * bg_planes[b, 0] + r1 * bg_planes[b, 1] + r2 * bg_planes[b, 2]
+            for k in range(n):
+                g = abs(z[k] * along - bg_planes[b, 3])
+                d[k] = g if g < d[k] else d[k]  # NaN skipped, as np.fmin skips it
+        for k in range(n):
+            near[i, k] = d[k] < tol_mm
+            if not (abs(d[k] - tol_mm) > 1e-6 and abs(z[k]) < 1e5):
                 unsure[u] = i * n + k
                 u += 1
     return unsure[:u]

@@ -43,21 +43,24 @@ def near_planes(points: np.ndarray, bg_planes: np.ndarray, tol_mm: float = 8.0) 
     return np.nan_to_num(d, nan=np.inf).min(axis=1) < tol_mm
 
 
-def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray, tol_mm: float) -> np.ndarray:
+def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray, tol_mm: float,
+                    chunk: int = 4096) -> np.ndarray:
     """(m, N) True where ray i's point on light plane k lies within ``tol_mm`` of a background plane.
 
     The distance is |(ray z) . n - d|. It is screened as |z (ray . n) - d| (no (m, N, 3) points), which
     differs only by rounding; where that lies within a hair of ``tol_mm`` the points are formed after
-    all, with the depths ``depth_for_labels`` gives, so the answer is the one the exact formula gives."""
-    near = np.empty((len(rays), len(planes)), bool)
-    unsure = _kernels.near_any_plane(np.ascontiguousarray(rays), planes, bg_planes, tol_mm, near)
-    if len(unsure):
-        i, k = np.divmod(unsure, len(planes))
-        rows, at = np.unique(i, return_inverse=True)
-        z = depth_for_labels(rays.take(rows, axis=0), planes)[at, k]
-        near[i, k] = _near_exact(rays[i] * z[:, None], np.ascontiguousarray(bg_planes[:, :3].T), bg_planes[:, 3],
-                                 tol_mm)
-    return near
+    all, so the answer is the one the exact formula gives (with ``depth_for_labels``' depths of the
+    ``chunk`` rays, formed only for a chunk that has such a case)."""
+    normals = np.ascontiguousarray(bg_planes[:, :3].T)  # (3, P)
+    out = np.empty((len(rays), len(planes)), bool)
+    for a in range(0, len(rays), chunk):
+        r = np.ascontiguousarray(rays[a:a + chunk])
+        unsure = _kernels.near_any_plane(r, planes, bg_planes, tol_mm, out[a:a + chunk])
+        if len(unsure):
+            i, k = np.divmod(unsure, len(planes))
+            z = depth_for_labels(r, planes)
+            out[a + i, k] = _near_exact(r[i] * z[i, k][:, None], normals, bg_planes[:, 3], tol_mm)
+    return out
 
 
 def _near_exact(points: np.ndarray, normals: np.ndarray, d: np.ndarray, tol_mm: float) -> np.ndarray:
