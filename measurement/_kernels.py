@@ -234,10 +234,10 @@ def screened_bins(rays, planes, centre, axis, bins, margin, out):
 
 @_jit
 def distinct_cells(rel, rows, sub, offsets, n, deep, most):
-    """``offsets._distinct_cells`` for the centres ``sub`` (S,) with relative stripes ``rel`` (S,) at
-    each offset of ``offsets`` (W,): per offset the number of distinct projector cells (stripe
-    rel + offset in [0, n), elevation bin ``rows[sub, stripe]``) and how many of them are keys of the
-    sorted ``deep`` (stripe * 1e6 + bin). rows : (M, N) int64 elevation bins (``BinTable``). Returns
+    """``offsets._distinct_cells`` for centres with relative stripes ``rel`` (S,) at each offset of
+    ``offsets`` (W,): per offset the number of distinct projector cells (stripe rel + offset in [0, n),
+    elevation bin ``rows[sub, stripe]``) and how many of them are keys of the sorted ``deep``
+    (stripe * 1e6 + bin). rows : (R, N) int64 elevation bins, sub : (S,) the centres' rows (``BinTable``). Returns
     cells (W,), hits (W,) and False (nothing counted) when a bitmap of the cells of every offset would
     take more than ``most`` bytes."""
     w_n = len(offsets)
@@ -501,4 +501,22 @@ def flag_touching(seg, left, right, flags):
                 out[seg[left[i]]] = True
             if right[i] >= 0:
                 out[seg[right[i]]] = True
+    return out
+
+
+@_jit
+def box_counts(mask, v, ui, wdt):
+    """Per centre (M,) at row ``v``, column ``ui`` (M,): the marked pixels of ``mask`` (H, W) uint8 0/1
+    in the ``wdt`` x ``wdt`` box around it, placed as cv2.boxFilter places an unnormalized box (the
+    anchor at wdt // 2), pixels outside the image counting 0."""
+    h, w = mask.shape
+    a = wdt // 2
+    out = np.empty(len(v), np.int64)
+    for i in range(len(v)):
+        c0, c1 = max(ui[i] - a, 0), min(ui[i] - a + wdt, w)
+        total = 0
+        for r in range(max(v[i] - a, 0), min(v[i] - a + wdt, h)):
+            for c in range(c0, c1):
+                total += mask[r, c]
+        out[i] = total
     return out

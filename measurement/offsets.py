@@ -66,21 +66,23 @@ class BinTable:
 
     def __init__(self, rays: np.ndarray, planes: np.ndarray, bins: float = 0.002) -> None:
         self.rays, self.planes, self.bins = rays, planes, bins
-        self._rows = np.empty((len(rays), len(planes)), np.int64)  # only the rows written are ever touched
-        self._known = np.zeros(len(rays), bool)
+        self._data = np.empty((0, len(planes)), np.int64)  # the rows computed so far, in that order
+        self._slot = np.full(len(rays), -1, np.int64)  # each centre's row in _data, -1 before
 
     def rows(self, idx: np.ndarray) -> np.ndarray:
         """(K, N) bins of the distinct centres ``idx`` (K,) on every plane."""
-        return self.table(idx).take(idx, axis=0)
+        data, slot = self.table(idx)
+        return data.take(slot, axis=0)
 
-    def table(self, idx: np.ndarray) -> np.ndarray:
-        """The whole table (M, N), with the rows of the distinct centres ``idx`` (K,) filled in (the
-        others hold garbage)."""
-        new = idx[~self._known[idx]]
+    def table(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The rows computed so far (R, N) and the row (K,) of each of the distinct centres ``idx`` (K,)
+        among them: a compact table (one (M, N) array would fault in most of its pages)."""
+        new = idx[self._slot[idx] < 0]
         if len(new):
-            self._rows[new] = _bins_on_planes(self.rays.take(new, axis=0), self.planes, self.bins)
-            self._known[new] = True
-        return self._rows
+            self._slot[new] = np.arange(len(self._data), len(self._data) + len(new))
+            self._data = np.concatenate([self._data, _bins_on_planes(self.rays.take(new, axis=0), self.planes,
+                                                                     self.bins)])
+        return self._data, self._slot[idx]
 
 
 def _bins_on_planes(rays: np.ndarray, planes: np.ndarray, bins: float, chunk: int = 2048) -> np.ndarray:
@@ -253,7 +255,7 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
     weighed = (len(rs) - lo - hi) / len(rs) >= 0.8
     rows = np.flatnonzero(weighed)
     table = table if table is not None else BinTable(rays, planes, bins)
-    cells, hits, counted = _kernels.distinct_cells(r[sub], table.table(sub), sub, offs[rows], n, deep, 20_000_000)
+    cells, hits, counted = _kernels.distinct_cells(r[sub], *table.table(sub), offs[rows], n, deep, 20_000_000)
     if not counted:  # bins too widely spread for a bitmap
         cells, hits = _offset_cells(r[sub], table.rows(sub), offs[rows], n, deep)
     conflicts = {int(offs[j]): float(hits[w] / cells[w]) for w, j in enumerate(rows)}
