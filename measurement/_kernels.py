@@ -520,3 +520,17 @@ def box_counts(mask, v, ui, wdt):
                 total += mask[r, c]
         out[i] = total
     return out
+
+
+@_jit
+def intersect(rays, planes, out):
+    """``triangulation.intersect``: into ``out`` (M, 3) the points mm where rays (M, 3) meet planes
+    (M, 4) [n, d]; NaN where |ray . n| < 1e-9. ray . n sums as np.einsum sums it."""
+    for i in range(len(rays)):
+        denom = (rays[i, 0] * planes[i, 0] + rays[i, 2] * planes[i, 2]) + rays[i, 1] * planes[i, 1]
+        s = planes[i, 3] / denom
+        if abs(denom) < 1e-9:
+            s = np.nan
+        for j in range(3):
+            out[i, j] = rays[i, j] * s
+    return out

@@ -8,6 +8,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from . import _kernels
 from .camera import Intrinsics, ray_grid
 
 
@@ -47,11 +48,20 @@ def rays_at(u: np.ndarray, v: np.ndarray, table: np.ndarray) -> np.ndarray:
 def intersect(rays: np.ndarray, planes: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """Points (M, 3) mm where rays (M, 3) meet planes (M, 4) [n, d] (n.X = d); NaN when parallel.
     out : (M, 3) array for the points (``rays`` itself when the caller no longer needs them)"""
+    if _einsum_layout(rays, planes):  # the kernel sums ray . n in the order np.einsum does for it
+        return _kernels.intersect(rays, planes, np.empty_like(rays) if out is None else out)
     denom = np.einsum("ij,ij->i", rays, planes[:, :3])
     with np.errstate(divide="ignore", invalid="ignore"):
         s = planes[:, 3] / denom
     s[np.abs(denom) < 1e-9] = np.nan
     return np.multiply(rays, s[:, None], out=out)
+
+
+def _einsum_layout(rays: np.ndarray, planes: np.ndarray) -> bool:
+    """Whether np.einsum("ij,ij->i", rays, planes[:, :3]) takes its unit-stride path (three float64
+    products summed (x + z) + y), so that the compiled kernels reproduce it."""
+    return (rays.dtype == planes.dtype == np.float64 and rays.ndim == planes.ndim == 2
+            and rays.strides[1] == planes.strides[1] == 8 and rays.shape[1] == 3 and len(rays) == len(planes))
 
 
 def depth_on(rays: np.ndarray, planes: np.ndarray) -> np.ndarray:
