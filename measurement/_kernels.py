@@ -505,24 +505,6 @@ def flag_touching(seg, left, right, flags):
 
 
 @_jit
-def box_counts(mask, v, ui, wdt):
-    """Per centre (M,) at row ``v``, column ``ui`` (M,): the marked pixels of ``mask`` (H, W) uint8 0/1
-    in the ``wdt`` x ``wdt`` box around it, placed as cv2.boxFilter places an unnormalized box (the
-    anchor at wdt // 2), pixels outside the image counting 0."""
-    h, w = mask.shape
-    a = wdt // 2
-    out = np.empty(len(v), np.int64)
-    for i in range(len(v)):
-        c0, c1 = max(ui[i] - a, 0), min(ui[i] - a + wdt, w)
-        total = 0
-        for r in range(max(v[i] - a, 0), min(v[i] - a + wdt, h)):
-            for c in range(c0, c1):
-                total += mask[r, c]
-        out[i] = total
-    return out
-
-
-@_jit
 def intersect(rays, planes, out):
     """``triangulation.intersect``: into ``out`` (M, 3) the points mm where rays (M, 3) meet planes
     (M, 4) [n, d]; NaN where |ray . n| < 1e-9. ray . n sums as np.einsum sums it."""
