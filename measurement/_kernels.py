@@ -516,3 +516,52 @@ def intersect(rays, planes, out):
         for j in range(3):
             out[i, j] = rays[i, j] * s
     return out
+
+
+@_jit
+def neighbour_pairs(seg, mask, left, right):
+    """``matching._neighbour_pairs``' rows (7, K): for each centre in ``mask`` (M,) whose row neighbour
+    on a side (``left``, then ``right`` (M,), -1 for none) lies in another segment, the centre, that
+    neighbour, the sign of the label step toward the centre (1 from the left, -1 from the right), the
+    segments of both, and the neighbour's own neighbour further out with its segment (-1 where none);
+    the left side's pairs first, each side's in centre order."""
+    count = 0
+    for i in range(len(seg)):
+        if mask[i]:
+            count += (left[i] >= 0 and seg[left[i]] != seg[i]) + (right[i] >= 0 and seg[right[i]] != seg[i])
+    cols = np.empty((7, count), np.int64)
+    p = 0
+    for side in range(2):
+        nb = left if side == 0 else right
+        for i in range(len(seg)):
+            f = nb[i]
+            if mask[i] and f >= 0 and seg[f] != seg[i]:
+                far = nb[f]
+                cols[0, p], cols[1, p], cols[2, p] = i, f, 1 - 2 * side
+                cols[3, p], cols[4, p] = seg[i], seg[f]
+                cols[5, p], cols[6, p] = far, seg[far] if far >= 0 else -1
+                p += 1
+    return cols
+
+
+@_jit
+def depth_screen(rays, planes, k, lo, hi, out):
+    """``triangulation.depth_in_range``'s screen: into ``out`` (M,) whether lo < z < hi for the depth z
+    of each ray (M, 3) on its plane ``planes[k]`` (N, 4) formed ray by ray (sums as np.einsum sums
+    them); returns the rays (U,) whose z lies within 1000 times its rounding of a bound, or is not
+    finite, for the exact (M, N) formula to decide."""
+    unsure = np.empty(len(rays), np.int64)
+    u = 0
+    for i in range(len(rays)):
+        p = planes[k[i]]
+        dot = (rays[i, 0] * p[0] + rays[i, 2] * p[2]) + rays[i, 1] * p[1]
+        size = (abs(rays[i, 0]) * abs(p[0]) + abs(rays[i, 2]) * abs(p[2])) + abs(rays[i, 1]) * abs(p[1])
+        z = p[3] / dot
+        margin = abs(z) * 1e-12 * (1 + size / abs(dot))
+        out[i] = z > lo and z < hi
+        a, b = abs(z - lo), abs(z - hi)
+        near = a if a != a or a < b else b  # np.minimum: NaN wins
+        if not near > margin:
+            unsure[u] = i
+            u += 1
+    return unsure[:u]

@@ -597,26 +597,7 @@ class _Pairs:
 
 def _neighbour_pairs(seg, mask, left, right) -> _Pairs:
     """The centres in ``mask`` whose row neighbour on a side lies in another segment (``_Pairs``)."""
-    members = np.flatnonzero(mask)
-    own = seg[members]
-    sides = []
-    for nb in (left, right):
-        nbr = nb[members]
-        # a missing neighbour (-1) reads seg[-1], but the first test drops it
-        keep = np.flatnonzero((nbr >= 0) & (seg[nbr] != own))
-        sides.append((keep, nbr.take(keep)))
-    # the rows written in place into one array: no per-side stacks to join
-    cols = np.empty((7, len(sides[0][0]) + len(sides[1][0])), np.int64)
-    parts = (cols[:, :len(sides[0][0])], cols[:, len(sides[0][0]):])
-    for part, (keep, nbr), nb, sign in zip(parts, sides, (left, right), (1, -1), strict=True):
-        part[0] = members.take(keep)
-        part[1] = nbr
-        part[2] = sign
-        part[3] = own.take(keep)
-        part[4] = seg.take(nbr)
-        part[5] = nb.take(nbr)
-        part[6] = np.where(part[5] >= 0, seg.take(np.maximum(part[5], 0)), -1)
-    return _Pairs(cols)
+    return _Pairs(_kernels.neighbour_pairs(seg, mask, left, right))
 
 
 def _open_pairs(pairs: _Pairs, table: np.ndarray) -> _Pairs:
