@@ -565,3 +565,69 @@ def depth_screen(rays, planes, k, lo, hi, out):
             unsure[u] = i
             u += 1
     return unsure[:u]
+
+
+@_jit
+def grow_by_depth(rays, planes, table, cols, tol_mm, n, gaps, penalty_mm, min_share, rounds):
+    """``matching._grow_all`` by depth continuity alone (no slope, no plane test): rounds of
+    ``depth_votes`` and ``majority`` by the pairs ``cols`` (``matching._Pairs`` rows) of the segments
+    beside one labelled the round before, until none joins; updates ``table`` (S,) and returns the
+    segments (G,) and labels (G,) in the order they joined."""
+    newly = table >= 0
+    out_seg = np.empty(len(table), np.int64)
+    out_lab = np.empty(len(table), np.int64)
+    m = 0
+    no_step = np.zeros(0)
+    for _ in range(rounds):
+        # only segments beside a newly labelled one can vote differently from the round before
+        active = flag_beside(cols[3], cols[4], newly)
+        at = voting_pairs(cols[3], cols[4], table, active, False)
+        if len(at) == 0:
+            break
+        best = depth_votes(rays, planes, table, cols, at, gaps, tol_mm, n, penalty_mm, no_step)
+        segs, labs = majority(cols[3][at], best, n, min_share)
+        if len(segs) == 0:
+            break
+        newly[:] = False
+        for g in range(len(segs)):
+            table[segs[g]] = labs[g]
+            newly[segs[g]] = True
+            out_seg[m], out_lab[m] = segs[g], labs[g]
+            m += 1
+    return out_seg[:m], out_lab[:m]
+
+
+@_jit
+def gapped_rows(u, order, m, n, window, slack, labels):
+    """``matching._gapped_rows`` row by row: the rows ``order`` (R m,) (m centres each, left to right,
+    columns ``u`` (M,) px) whose gaps are each one or two local spacings (the median gap of the odd
+    ``window`` around it, the row's end gaps repeated), within ``slack``, adding up to n - 1, with a
+    smoothly changing spacing per stripe, get their labels (0, then the running sum of the steps)
+    written into ``labels`` (M,)."""
+    pad = window // 2
+    gaps, r, k, per = np.empty(m - 1), np.empty(m - 1), np.empty(m - 1), np.empty(m - 1)
+    win = np.empty(window)
+    for row in range(len(order) // m):
+        at = order[row * m:(row + 1) * m]
+        for j in range(m - 1):
+            gaps[j] = u[at[j + 1]] - u[at[j]]
+        ok = True
+        total = 0.0
+        for j in range(m - 1):
+            for t in range(window):
+                win[t] = gaps[min(max(j - pad + t, 0), m - 2)]
+            win.sort()
+            r[j] = gaps[j] / max(win[pad], 1e-6)  # the median: the middle value of an odd window
+            k[j] = np.rint(r[j])
+            per[j] = gaps[j] / max(k[j], 1.0)
+            total += k[j]
+            ok &= k[j] >= 1 and k[j] <= 2 and abs(r[j] - k[j]) < slack and gaps[j] > 2
+        for j in range(m - 2):
+            ratio = per[j + 1] / max(per[j], 1e-6)
+            ok &= ratio > 0.7 and ratio < 1.43
+        if ok and total == n - 1:
+            lab = 0
+            labels[at[0]] = 0
+            for j in range(m - 1):
+                lab += np.int64(k[j])
+                labels[at[j + 1]] = lab

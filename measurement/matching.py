@@ -113,6 +113,9 @@ def _gapped_rows(c: Centres, order: np.ndarray, m: int, n: int, labels: np.ndarr
     along the row."""
     if len(order) == 0 or m < window + 1:
         return
+    if window % 2:  # the median is one of the gaps: row by row, compiled
+        _kernels.gapped_rows(c.u, order, m, n, window, slack, labels)
+        return
     gaps = np.diff(c.u[order].reshape(-1, m), axis=1)  # (R, m - 1) pixels
     pad = window // 2
     windows = np.lib.stride_tricks.sliding_window_view(np.pad(gaps, ((0, 0), (pad, pad)), mode="edge"), window,
@@ -496,6 +499,11 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
     ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``, when already known."""
     table = _label_table(seg, seg_label)
     pairs = _open_pairs(_neighbour_pairs(seg, long_seg, left, right) if pairs is None else pairs, table)
+    if depth_only and not slope and bg_planes is None and avoid_planes is None:  # all rounds compiled
+        segs, labs = _kernels.grow_by_depth(rays, planes, table, pairs.cols, tol_mm, n, np.array(gaps, np.int64),
+                                            GAP_PENALTY_MM, min_share, 40)
+        seg_label.update(zip(segs.tolist(), labs.tolist(), strict=True))
+        return
     newly = table >= 0
     steps: dict[int, np.ndarray] | None = None
     since = None
