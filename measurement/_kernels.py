@@ -631,3 +631,30 @@ def gapped_rows(u, order, m, n, window, slack, labels):
             for j in range(m - 1):
                 lab += np.int64(k[j])
                 labels[at[j + 1]] = lab
+
+
+@_jit
+def _point(rays, i, planes, k, j):
+    """Coordinate j of ``triangulation.intersect`` of ray i with plane k (mm)."""
+    denom = (rays[i, 0] * planes[k, 0] + rays[i, 2] * planes[k, 2]) + rays[i, 1] * planes[k, 1]
+    s = planes[k, 3] / denom
+    if abs(denom) < 1e-9:
+        s = np.nan
+    return rays[i, j] * s
+
+
+@_jit
+def neighbour_distances(rays, planes, lab, left, idx):
+    """3-D distance (K,) mm between each centre ``idx`` (K,) on its plane ``lab`` (M,) and its left row
+    neighbour ``left`` (M,) on that one's: np.linalg.norm of the difference of ``intersect``'s points,
+    the squares summed (x + y) + z as it sums them."""
+    out = np.empty(len(idx))
+    for q in range(len(idx)):
+        i = idx[q]
+        f = left[i]
+        sq = 0.0
+        for j in range(3):
+            d = _point(rays, i, planes, lab[i], j) - _point(rays, f, planes, lab[f], j)
+            sq = d * d if j == 0 else sq + d * d
+        out[q] = np.sqrt(sq)
+    return out

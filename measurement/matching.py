@@ -53,7 +53,7 @@ from .segments import (
     smooth_along_segments,
     split_at_changes,
 )
-from .triangulation import depth_in_range, depth_on, intersect
+from .triangulation import depth_in_range, depth_on, intersect, kernel_layout
 
 __all__ = ["Labels", "MatchingParams", "denoise", "label_centres", "link_segments", "smooth_along_segments"]
 GAP_PENALTY_MM = 8.0
@@ -564,6 +564,8 @@ def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
     idx = np.nonzero(have)[0]
     if len(idx) < 10:
         return 15.0
+    if kernel_layout(rays, planes):
+        return float(np.median(_kernels.neighbour_distances(rays, planes, lab, left, idx)))
     a = intersect(rays.take(idx, axis=0), planes.take(lab[idx], axis=0))
     b = intersect(rays.take(left[idx], axis=0), planes.take(lab[left[idx]], axis=0))
     return float(np.median(np.linalg.norm(a - b, axis=1)))

@@ -48,7 +48,7 @@ def rays_at(u: np.ndarray, v: np.ndarray, table: np.ndarray) -> np.ndarray:
 def intersect(rays: np.ndarray, planes: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """Points (M, 3) mm where rays (M, 3) meet planes (M, 4) [n, d] (n.X = d); NaN when parallel.
     out : (M, 3) array for the points (``rays`` itself when the caller no longer needs them)"""
-    if _einsum_layout(rays, planes) and len(rays) == len(planes):  # summed as np.einsum sums ray . n
+    if kernel_layout(rays, planes) and len(rays) == len(planes):  # summed as np.einsum sums ray . n
         return _kernels.intersect(rays, planes, np.empty_like(rays) if out is None else out)
     denom = np.einsum("ij,ij->i", rays, planes[:, :3])
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -57,7 +57,7 @@ def intersect(rays: np.ndarray, planes: np.ndarray, out: np.ndarray | None = Non
     return np.multiply(rays, s[:, None], out=out)
 
 
-def _einsum_layout(rays: np.ndarray, planes: np.ndarray) -> bool:
+def kernel_layout(rays: np.ndarray, planes: np.ndarray) -> bool:
     """Whether np.einsum("ij,ij->i", rays, planes[:, :3]) takes its unit-stride path (three float64
     products summed (x + z) + y), so that the compiled kernels reproduce it."""
     return (rays.dtype == planes.dtype == np.float64 and rays.ndim == planes.ndim == 2
@@ -88,7 +88,7 @@ def depth_in_range(rays: np.ndarray, planes: np.ndarray, k: np.ndarray, lo: floa
     ``depth_for_labels`` gives it, without that (M, N) matrix: z is formed ray by ray (the same formula,
     rounded another way), and where it lies within that rounding of a bound, or is not finite, the
     matrix's row decides."""
-    if _einsum_layout(rays, planes):  # ray by ray, summed as np.einsum sums
+    if kernel_layout(rays, planes):  # ray by ray, summed as np.einsum sums
         out = np.empty(len(rays), bool)
         unsure = _kernels.depth_screen(rays, planes, k, float(lo), float(hi), out)
     else:

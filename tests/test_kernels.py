@@ -73,3 +73,56 @@ def test_majority_keeps_the_earliest_cast_of_a_tie_and_the_first_voted_order():
         got = dict(zip(segs.tolist(), labs.tolist(), strict=True))
         expected = _majority_reference(voter, vote, 4, 0.4)
         assert got == expected and list(got) == list(expected)
+
+
+def test_intersect_matches_the_einsum_formula_to_the_bit():
+    from measurement.triangulation import intersect
+
+    def numpy_form(rays, planes):
+        denom = np.einsum("ij,ij->i", rays, planes[:, :3])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = planes[:, 3] / denom
+        s[np.abs(denom) < 1e-9] = np.nan
+        return rays * s[:, None]
+
+    rng = np.random.default_rng(6)
+    rays = rng.normal(size=(4000, 3))
+    rays[:, 2] = 1.0
+    planes = rng.normal(size=(4000, 4)) * [1, 1, 1, 1000]
+    planes[:5, :3] = 0.0  # parallel: NaN
+    assert np.array_equal(intersect(rays, planes), numpy_form(rays, planes), equal_nan=True)
+    # np.einsum sums a column-major array's rows another way: that layout keeps the NumPy code
+    fortran = np.asfortranarray(rays)
+    assert np.array_equal(intersect(fortran, planes), numpy_form(fortran, planes), equal_nan=True)
+
+
+def _gapped_reference(u, order, m, n, labels, window=7, slack=0.2):
+    gaps = np.diff(u[order].reshape(-1, m), axis=1)
+    pad = window // 2
+    windows = np.lib.stride_tricks.sliding_window_view(np.pad(gaps, ((0, 0), (pad, pad)), mode="edge"), window,
+                                                      axis=1)
+    r = gaps / np.maximum(np.median(windows, axis=2), 1e-6)
+    k = np.rint(r)
+    per_stripe = gaps / np.maximum(k, 1)
+    ratio = per_stripe[:, 1:] / np.maximum(per_stripe[:, :-1], 1e-6)
+    ok = (((k >= 1) & (k <= 2) & (np.abs(r - k) < slack)).all(axis=1) & (k.sum(axis=1) == n - 1)
+          & (gaps > 2).all(axis=1) & ((ratio > 0.7) & (ratio < 1.43)).all(axis=1))
+    steps = k[ok].astype(np.int64)
+    lab = np.concatenate([np.zeros((len(steps), 1), np.int64), np.cumsum(steps, axis=1)], axis=1)
+    labels[order.reshape(-1, m)[ok].ravel()] = lab.ravel()
+
+
+def test_gapped_rows_label_the_rows_the_numpy_form_labels():
+    rng = np.random.default_rng(7)
+    n, m, rows = 40, 37, 300
+    steps = np.ones((rows, m - 1))
+    for row in steps:  # three missing stripes each, sometimes a fourth
+        row[rng.choice(m - 1, 3 + (rng.random() < 0.3), replace=False)] = 2
+    u = np.cumsum(np.concatenate([rng.uniform(0, 50, (rows, 1)), steps * 20 + rng.normal(0, 2.5, steps.shape)],
+                                 axis=1), axis=1).ravel()
+    order = np.arange(len(u))
+    got, expected = np.full(len(u), -1), np.full(len(u), -1)
+    _kernels.gapped_rows(u, order, m, n, 7, 0.2, got)
+    _gapped_reference(u, order, m, n, expected)
+    assert (expected >= 0).any() and (expected < 0).any()
+    assert np.array_equal(got, expected)
