@@ -614,9 +614,13 @@ def gapped_rows(u, order, m, n, window, slack, labels):
         ok = True
         total = 0.0
         for j in range(m - 1):
-            for t in range(window):
-                win[t] = gaps[min(max(j - pad + t, 0), m - 2)]
-            win.sort()
+            for t in range(window):  # an insertion sort: a handful of values
+                g = gaps[min(max(j - pad + t, 0), m - 2)]
+                q = t
+                while q > 0 and win[q - 1] > g:
+                    win[q] = win[q - 1]
+                    q -= 1
+                win[q] = g
             r[j] = gaps[j] / max(win[pad], 1e-6)  # the median: the middle value of an odd window
             k[j] = np.rint(r[j])
             per[j] = gaps[j] / max(k[j], 1.0)
