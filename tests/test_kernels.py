@@ -5,6 +5,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from measurement import _kernels
+from measurement._kernels.rays import _depth
 
 
 def _nearest_key(key, target):
@@ -44,7 +45,7 @@ def test_depth_sums_three_products_as_einsum_does():
     planes = rng.normal(size=(5000, 4)) * [1, 1, 1, 1000]
     denom = np.einsum("ij,ij->i", rays, planes[:, :3])
     expected = rays[:, 2] * (planes[:, 3] / denom)
-    got = np.array([_kernels._depth(rays, i, planes, i) for i in range(len(rays))])
+    got = np.array([_depth(rays, i, planes, i) for i in range(len(rays))])
     assert np.array_equal(got, expected)
 
 
