@@ -3,7 +3,7 @@ function it replaces: the same floating-point operations in the same order (np.e
 products as (x + z) + y), or a screened formula that leaves to the exact NumPy one every case rounding
 could decide, so the labels come out to the bit.
 
-numba compiles a kernel on its first call (about ten seconds for all of them) and caches the machine code
+numba compiles a kernel on its first call (about twenty seconds for all of them) and caches the machine code
 in ``__pycache__`` beside this file, else in ``NUMBA_CACHE_DIR`` or the user's cache directory; where
 none is writable the kernels are compiled in memory on each start."""
 
