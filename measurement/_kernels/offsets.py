@@ -9,7 +9,7 @@ from .jit import compiled
 
 @compiled
 def screened_bins(rays, planes, centre, axis, bins, margin, out):
-    """``offsets._bins_on_planes_chunk`` ray by ray: into ``out`` (S, N) int64 the elevation bin of
+    """``offsets._bins_on_planes``' screen ray by ray: into ``out`` (S, N) int64 the elevation bin of
     each ray (S, 3) on every light plane (N, 4) by the screened formula, and returns the positions
     k S + i (U,) int64, sorted, where it is not sure (within ``margin`` of a bin's edge, an ill-conditioned ray or point):
     those the exact formula must decide. centre (3,) mm, axis (3,) unit: the projector's frame."""

@@ -10,7 +10,8 @@ from .jit import compiled
 @compiled
 def _nearest_shifted(key, shift):
     """For each entry of sorted ``key`` (K,) float64, the index (K,) of the entry nearest ``key + shift``
-    (the lower of a tie) and the distance (K,): ``segments._nearest_key(key, key + shift)``. The targets
+    (the lower of a tie) and the distance (K,): np.searchsorted(key, target) clipped to [1, K - 1], then
+    the nearer of the entries either side (the lower when equally near). The targets
     are sorted too, so one sweep finds every ``np.searchsorted(key, target)`` ('left')."""
     n = len(key)
     best = np.empty(n, np.int64)
@@ -82,7 +83,8 @@ def _prefix(x, a, length, out):
 
 @compiled
 def _slope(cu, cv, cuv, cvv, lo, hi, n):
-    """Least-squares slope du/dv over the window [lo, hi) of running sums (``segments._slopes``)."""
+    """Least-squares slope du/dv over the window [lo, hi) of running sums cu, cv, cuv, cvv (0 where
+    the rows' spread is under 1e-9)."""
     su, sv = cu[hi] - cu[lo], cv[hi] - cv[lo]
     suv, svv = cuv[hi] - cuv[lo], cvv[hi] - cvv[lo]
     den = n * svv - sv * sv
