@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import _kernels
 from .segments import link_segments, split_at_changes
 from .triangulation import depth_for_labels, intersect
 
@@ -48,34 +49,18 @@ def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray,
 
     The distance is |(ray z) . n - d|. It is screened as |z (ray . n) - d| (no (m, N, 3) points), which
     differs only by rounding; where that lies within a hair of ``tol_mm`` the points are formed after
-    all, so the answer is the one the exact formula gives."""
+    all, so the answer is the one the exact formula gives (with ``depth_for_labels``' depths of the
+    ``chunk`` rays, formed only for a chunk that has such a case)."""
     normals = np.ascontiguousarray(bg_planes[:, :3].T)  # (3, P)
     out = np.empty((len(rays), len(planes)), bool)
     for a in range(0, len(rays), chunk):
-        r = rays[a:a + chunk]
-        z = depth_for_labels(r, planes)  # chunk by chunk: (chunk, N) stays in cache
-        along = r @ normals  # (m, P)
-        d = _plane_gap(z, along[:, :1], bg_planes[0, 3])
-        for p in range(1, len(bg_planes)):  # fmin skips NaN (ray parallel to a plane) like the exact min
-            np.fmin(d, _plane_gap(z, along[:, p:p + 1], bg_planes[p, 3]), out=d)
-        near = d < tol_mm
-        # rounding could decide, or NaN/far
-        gap = np.subtract(d, tol_mm, out=d)
-        unsure = np.abs(gap, out=gap) > 1e-6
-        unsure &= np.abs(z, out=gap) < 1e5
-        np.logical_not(unsure, out=unsure)
-        i, k = np.divmod(np.flatnonzero(unsure), unsure.shape[1])  # np.nonzero is slow on 2-D masks
-        if len(i):
-            near[i, k] = _near_exact(r[i] * z[i, k][:, None], normals, bg_planes[:, 3], tol_mm)
-        out[a:a + chunk] = near
+        r = np.ascontiguousarray(rays[a:a + chunk])
+        unsure = _kernels.near_any_plane(r, planes, bg_planes, tol_mm, out[a:a + chunk])
+        if len(unsure):
+            i, k = np.divmod(unsure, len(planes))
+            z = depth_for_labels(r, planes)
+            out[a + i, k] = _near_exact(r[i] * z[i, k][:, None], normals, bg_planes[:, 3], tol_mm)
     return out
-
-
-def _plane_gap(z: np.ndarray, along: np.ndarray, d: float) -> np.ndarray:
-    """|z along - d| (m, N) for depths z (m, N) and ray . normal ``along`` (m, 1), in one buffer."""
-    out = np.multiply(z, along)
-    out -= d
-    return np.abs(out, out=out)
 
 
 def _near_exact(points: np.ndarray, normals: np.ndarray, d: np.ndarray, tol_mm: float) -> np.ndarray:
@@ -94,9 +79,9 @@ def _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm):
     idx = idx[np.argsort(seg[idx], kind="stable")]
     starts = np.searchsorted(seg[idx], sids)
     near = _near_any_plane(rays.take(idx, axis=0), planes, bg_planes, tol_mm)
-    counts = np.add.reduceat(near, starts, axis=0, dtype=np.int64) if len(sids) else near[:0]
-    sizes = np.diff(np.r_[starts, len(idx)])
-    return counts / sizes[:, None], idx, np.r_[starts, len(idx)]
+    bounds = np.r_[starts, len(idx)]
+    counts = _kernels.group_counts(near, bounds)
+    return counts / np.diff(bounds)[:, None], idx, bounds
 
 
 def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, min_rows: int = 15,

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _kernels
 from .background import (
     background_like,
     background_planes,
@@ -52,7 +53,7 @@ from .segments import (
     smooth_along_segments,
     split_at_changes,
 )
-from .triangulation import depth_in_range, depth_on, intersect
+from .triangulation import depth_in_range, depth_on, intersect, kernel_layout
 
 __all__ = ["Labels", "MatchingParams", "denoise", "label_centres", "link_segments", "smooth_along_segments"]
 GAP_PENALTY_MM = 8.0
@@ -111,6 +112,9 @@ def _gapped_rows(c: Centres, order: np.ndarray, m: int, n: int, labels: np.ndarr
     it), within ``slack``, adding up to n - 1 spacings, and whose spacing per stripe changes smoothly
     along the row."""
     if len(order) == 0 or m < window + 1:
+        return
+    if window % 2:  # the median is one of the gaps: row by row, compiled
+        _kernels.gapped_rows(c.u, order, m, n, window, slack, labels)
         return
     gaps = np.diff(c.u[order].reshape(-1, m), axis=1)  # (R, m - 1) pixels
     pad = window // 2
@@ -502,6 +506,11 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
     ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``, when already known."""
     table = _label_table(seg, seg_label)
     pairs = _open_pairs(_neighbour_pairs(seg, long_seg, left, right) if pairs is None else pairs, table)
+    if depth_only and not slope and bg_planes is None and avoid_planes is None:  # all rounds compiled
+        segs, labs = _kernels.grow_by_depth(rays, planes, table, pairs.cols, tol_mm, n, np.array(gaps, np.int64),
+                                            GAP_PENALTY_MM, min_share, 40)
+        seg_label.update(zip(segs.tolist(), labs.tolist(), strict=True))
+        return
     newly = table >= 0
     steps: dict[int, np.ndarray] | None = None
     since = None
@@ -542,20 +551,8 @@ def _segment_steps(seg, rays, planes, table, left, right, tol_mm,
     measured = table >= 0
     if since is not None:
         measured &= since[1]
-    idx = np.flatnonzero(measured[seg])
-    k = table[seg[idx]]
-    z = depth_on(rays.take(idx, axis=0), planes.take(k, axis=0))
     for sign, nb in ((1, left), (-1, right)):
-        f = nb[idx]
-        has = f >= 0
-        kf = np.where(has, table[seg[np.maximum(f, 0)]], -1)
-        ok = has & (kf == k - sign) & (kf >= 0)
-        step = np.zeros(len(idx))
-        step[ok] = z[ok] - depth_on(rays.take(f[ok], axis=0), planes.take(kf[ok], axis=0))
-        ok &= np.abs(step) < 2 * tol_mm
-        cnt = np.bincount(seg[idx[ok]], minlength=len(table))
-        tot = np.bincount(seg[idx[ok]], weights=step[ok], minlength=len(table))
-        out[sign] = np.where(cnt >= min_rows, tot / np.maximum(cnt, 1), np.nan)
+        out[sign] = _kernels.segment_steps(seg, rays, planes, table, nb, sign, measured, tol_mm, min_rows)
         if since is not None:
             out[sign] = np.where(since[1], out[sign], since[0][sign])
     return out
@@ -563,11 +560,7 @@ def _segment_steps(seg, rays, planes, table, left, right, tol_mm,
 
 def _touching(seg: np.ndarray, left: np.ndarray, right: np.ndarray, flags: np.ndarray) -> np.ndarray:
     """(S,) the segments flagged in ``flags`` (S,) and those with a centre beside one of theirs in its row."""
-    out = flags.copy()
-    members = np.flatnonzero(flags[seg])
-    for nb in (left[members], right[members]):
-        out[seg[nb[nb >= 0]]] = True
-    return out
+    return _kernels.flag_touching(seg, left, right, flags)
 
 
 def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
@@ -578,6 +571,8 @@ def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
     idx = np.nonzero(have)[0]
     if len(idx) < 10:
         return 15.0
+    if kernel_layout(rays, planes):
+        return float(np.median(_kernels.neighbour_distances(rays, planes, lab, left, idx)))
     a = intersect(rays.take(idx, axis=0), planes.take(lab[idx], axis=0))
     b = intersect(rays.take(left[idx], axis=0), planes.take(lab[left[idx]], axis=0))
     return float(np.median(np.linalg.norm(a - b, axis=1)))
@@ -619,26 +614,7 @@ class _Pairs:
 
 def _neighbour_pairs(seg, mask, left, right) -> _Pairs:
     """The centres in ``mask`` whose row neighbour on a side lies in another segment (``_Pairs``)."""
-    members = np.flatnonzero(mask)
-    own = seg[members]
-    sides = []
-    for nb in (left, right):
-        nbr = nb[members]
-        # a missing neighbour (-1) reads seg[-1], but the first test drops it
-        keep = np.flatnonzero((nbr >= 0) & (seg[nbr] != own))
-        sides.append((keep, nbr.take(keep)))
-    # the rows written in place into one array: no per-side stacks to join
-    cols = np.empty((7, len(sides[0][0]) + len(sides[1][0])), np.int64)
-    parts = (cols[:, :len(sides[0][0])], cols[:, len(sides[0][0]):])
-    for part, (keep, nbr), nb, sign in zip(parts, sides, (left, right), (1, -1), strict=True):
-        part[0] = members.take(keep)
-        part[1] = nbr
-        part[2] = sign
-        part[3] = own.take(keep)
-        part[4] = seg.take(nbr)
-        part[5] = nb.take(nbr)
-        part[6] = np.where(part[5] >= 0, seg.take(np.maximum(part[5], 0)), -1)
-    return _Pairs(cols)
+    return _Pairs(_kernels.neighbour_pairs(seg, mask, left, right))
 
 
 def _open_pairs(pairs: _Pairs, table: np.ndarray) -> _Pairs:
@@ -648,9 +624,7 @@ def _open_pairs(pairs: _Pairs, table: np.ndarray) -> _Pairs:
 
 def _beside(pairs: _Pairs, flags: np.ndarray) -> np.ndarray:
     """(S,) the own segments of the ``pairs`` whose neighbour's segment is flagged in ``flags`` (S,)."""
-    out = np.zeros(len(flags), bool)
-    out[pairs.own_seg[flags[pairs.nb_seg]]] = True
-    return out
+    return _kernels.flag_beside(pairs.own_seg, pairs.nb_seg, flags)
 
 
 def _label_table(seg: np.ndarray, seg_label: dict[int, int]) -> np.ndarray:
@@ -667,42 +641,36 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
     """One round of voting on label ``table`` (S,) by neighbour ``pairs``: segment -> label for the
     segments (unlabelled ones, or with ``relabel`` labelled ones) whose row neighbours agree on a label
     that continues their surface, for the segments flagged in ``active`` (S,) (all when None)."""
-    at = np.flatnonzero(active[pairs.own_seg]) if active is not None else np.arange(pairs.cols.shape[1])
-    own, kn = table[pairs.own_seg[at]], table[pairs.nb_seg[at]]
-    take = ((own >= 0) if relabel else (own < 0)) & (kn >= 0)
-    idx, nbr, sign, voter, nb_seg, far, far_seg = pairs.take(at[take])
-    kn = kn[take]
-    if len(idx) == 0:
+    active = np.ones(len(table), bool) if active is None else active
+    at = _kernels.voting_pairs(pairs.own_seg, pairs.nb_seg, table, active, relabel)
+    if len(at) == 0:
         return {}
     if depth_only:
-        zn = depth_on(rays.take(nbr, axis=0), planes.take(kn, axis=0))
+        step = np.zeros(0)
         if slope:
+            idx, nbr, sign, _, nb_seg, far, far_seg = pairs.take(at)
+            kn = table[nb_seg]
+            zn = depth_on(rays.take(nbr, axis=0), planes.take(kn, axis=0))
             step = _slope_steps(rays, planes, table, idx, nbr, sign, nb_seg, far, far_seg, kn, zn, tol_mm,
                                 seg_steps)
-    else:
-        pn = intersect(rays.take(nbr, axis=0), planes.take(kn, axis=0))
+        best_k = _kernels.depth_votes(rays, planes, table, pairs.cols, at, np.array(gaps, np.int64), tol_mm, n,
+                                      GAP_PENALTY_MM, step)
+        return _majority(pairs.own_seg[at], best_k, n, min_share)
+    idx, nbr, sign, voter, nb_seg, far, far_seg = pairs.take(at)
+    kn = table[nb_seg]
+    # on flat backgrounds the 3-D gap per stripe is the sharper test
+    pn = intersect(rays.take(nbr, axis=0), planes.take(kn, axis=0))
     # the voters' points on the planes of every gap at once (row by row as one gap at a time)
     ks = [kn + sign * gap for gap in gaps]
     on_k = np.clip(np.concatenate(ks), 0, n - 1)
     voter_rays = np.tile(rays.take(idx, axis=0), (len(gaps), 1))
-    if depth_only:
-        z_gap = depth_on(voter_rays, planes.take(on_k, axis=0)).reshape(len(gaps), -1)
-    else:
-        p_gap = intersect(voter_rays, planes.take(on_k, axis=0)).reshape(len(gaps), -1, 3)
+    p_gap = intersect(voter_rays, planes.take(on_k, axis=0)).reshape(len(gaps), -1, 3)
     best_k = np.full(len(idx), -1)
     best_d = np.full(len(idx), np.inf)
     for g, gap in enumerate(gaps):
         k = ks[g]
         okk = (k >= 0) & (k < n)
-        if depth_only:
-            # on a curved body, depth continuity separates a right index (median 3 mm on the simulated
-            # fox, 99 % under 36) from a wrong one (a whole depth step, 35-75 mm) better than 3-D gaps
-            d = np.abs(z_gap[g] - (zn + step * gap if slope else zn))
-            # a missing stripe is the rarer event: a wider gap must fit clearly better to win (a
-            # steep flank seen from above makes the right gap of one look discontinuous)
-            d = d + (gap - 1) * GAP_PENALTY_MM
-        else:  # on flat backgrounds the 3-D gap per stripe is the sharper test
-            d = np.linalg.norm(p_gap[g] - pn, axis=1) / gap
+        d = np.linalg.norm(p_gap[g] - pn, axis=1) / gap
         better = okk & (d < best_d) & (d < tol_mm)
         best_k[better], best_d[better] = k[better], d[better]
     return _majority(voter, best_k, n, min_share)
@@ -744,19 +712,8 @@ def _majority(voter: np.ndarray, vote: np.ndarray, n: int, min_share: float) -> 
     """Segment -> label for the segments whose most frequent vote (the earliest cast of a tie) has at
     least 3 votes and ``min_share`` of their voters. voter : (V,) segment ids; vote : (V,) labels in
     [0, n), -1 for a voter that found no label (it still counts as support)."""
-    cast = np.nonzero(vote >= 0)[0]
-    if len(cast) == 0:
-        return {}
-    support = np.bincount(voter)
-    pair, first, cnt = np.unique(voter[cast] * (n + 1) + vote[cast], return_index=True, return_counts=True)
-    segs, labs = pair // (n + 1), pair % (n + 1)
-    order = np.lexsort((first, -cnt, segs))
-    best = order[np.r_[True, segs[order][1:] != segs[order][:-1]]]
-    best = best[(cnt[best] >= 3) & (cnt[best] >= min_share * support[segs[best]])]
-    seg_first = np.full(len(support), len(cast))
-    np.minimum.at(seg_first, segs, first)
-    best = best[np.argsort(seg_first[segs[best]])]  # in the order the segments first got a vote
-    return dict(zip(segs[best].tolist(), labs[best].tolist(), strict=True))
+    segs, labs = _kernels.majority(voter, vote, n, min_share)
+    return dict(zip(segs.tolist(), labs.tolist(), strict=True))
 
 
 def _refine(rays, planes, seg, seg_label, pairs: _Pairs, tol_mm, n, rounds: int = 3) -> None:

@@ -13,6 +13,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from . import _kernels
 from .planes import pencil_axis
 from .triangulation import intersect
 
@@ -65,67 +66,45 @@ class BinTable:
 
     def __init__(self, rays: np.ndarray, planes: np.ndarray, bins: float = 0.002) -> None:
         self.rays, self.planes, self.bins = rays, planes, bins
-        self._rows = np.empty((len(rays), len(planes)), np.int64)  # only the rows written are ever touched
-        self._known = np.zeros(len(rays), bool)
+        self._data = np.empty((0, len(planes)), np.int64)  # the rows computed so far, in that order
+        self._slot = np.full(len(rays), -1, np.int64)  # each centre's row in _data, -1 before
 
     def rows(self, idx: np.ndarray) -> np.ndarray:
         """(K, N) bins of the distinct centres ``idx`` (K,) on every plane."""
-        new = idx[~self._known[idx]]
+        data, slot = self.table(idx)
+        return data.take(slot, axis=0)
+
+    def table(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The rows computed so far (R, N) and the row (K,) of each of the distinct centres ``idx`` (K,)
+        among them: a compact table (one (M, N) array would fault in most of its pages)."""
+        new = idx[self._slot[idx] < 0]
         if len(new):
-            self._rows[new] = _bins_on_planes(self.rays.take(new, axis=0), self.planes, self.bins)
-            self._known[new] = True
-        return self._rows.take(idx, axis=0)
+            self._slot[new] = np.arange(len(self._data), len(self._data) + len(new))
+            self._data = np.concatenate([self._data, _bins_on_planes(self.rays.take(new, axis=0), self.planes,
+                                                                     self.bins)])
+        return self._data, self._slot[idx]
 
 
 def _bins_on_planes(rays: np.ndarray, planes: np.ndarray, bins: float, chunk: int = 2048) -> np.ndarray:
     """``elevation_bins`` (S, N) of the point of each ray (S, 3) on every light plane (N, 4), as
-    ``elevation_bins(intersect(...))`` gives them ray by ray; ``chunk`` rays at a time, in cache."""
+    ``elevation_bins(intersect(...))`` gives them ray by ray; ``chunk`` rays at a time, in cache.
+
+    Without (S, N, 3) points: with s the ray's scale on the plane, the point's offset from the projector
+    centre c is s r - c, the elevation's numerator s (r . a) - c . a and its squared distance from the
+    axis |s r - c|^2 minus that squared (``_kernels.screened_bins``). This rounds differently; where that
+    could matter (within 1e-5 of a bin's edge, a ray nearly parallel to its plane, a point near the axis)
+    the exact formula decides, in the order and batches it always did. On well-conditioned points (ray .
+    normal at least 1e-3 of the sum of its terms' sizes, the distance from the axis at least 1e-2 of
+    |s r - c| + |c|) the two differ by under 1e-6 (64 ulp times condition numbers up to 1e3 and 300); on
+    1.9 M points of the bench views by at most 1.1e-16."""
     out = np.empty((len(rays), len(planes)), np.int64)
-    for a in range(0, len(rays), chunk):
-        out[a:a + chunk] = _bins_on_planes_chunk(rays[a:a + chunk], planes, bins).T
-    return out
-
-
-def _bins_on_planes_chunk(rays: np.ndarray, planes: np.ndarray, bins: float, margin: float = 1e-5
-                          ) -> np.ndarray:
-    """``_bins_on_planes`` transposed, (N, S), without (N, S, 3) points: with s the ray's scale on the plane, the point's
-    offset from the projector centre c is s r - c, the elevation's numerator s (r . a) - c . a and its
-    squared distance from the axis |s r - c|^2 minus that squared. This rounds differently; where that
-    could matter (within ``margin`` of a bin's edge, a ray nearly parallel to its plane, a point near
-    the axis) the exact formula decides."""
     centre, a = _projector_frame(planes)
-    r = np.ascontiguousarray(rays.T)  # (3, S): each plane's row is one long loop over the rays
-    dot = planes[:, :1] * r[0]
-    dot += planes[:, 1:2] * r[1]
-    dot += planes[:, 2:3] * r[2]
-    size = np.abs(dot)
-    # on well-conditioned points (ray . normal at least 1e-3 of the sum of its terms' sizes, the distance
-    # from the axis at least 1e-2 of |s r - c| + |c|) the two differ by under 1e-6 (64 ulp times condition
-    # numbers up to 1e3 and 300); on 1.9 M points of the bench views by at most 1.1e-16
-    sure = size > 1e-3 * np.abs(r).sum(axis=0)
-    sure &= size > 1e-6
-    s = np.divide(planes[:, 3:], dot, out=size)
-    along = s * (a @ r)
-    along -= centre @ a
-    q2 = s * (r * r).sum(axis=0)
-    q2 -= 2 * (centre @ r)
-    q2 *= s
-    q2 += centre @ centre  # |s r - c|^2
-    across2 = np.multiply(along, along, out=dot)
-    np.subtract(q2, across2, out=across2)
-    q2 += centre @ centre
-    sure &= across2 > 1e-4 * q2
-    f = np.sqrt(across2, out=across2)
-    f *= bins
-    f = np.divide(along, f, out=f)
-    out = np.floor(f)
-    f -= out
-    tau = margin / bins
-    sure &= (f > tau) & (f < 1 - tau)
-    out = out.astype(np.int64)
-    k, i = np.divmod(np.flatnonzero(~sure), len(rays))
-    if len(i):
-        out[k, i] = _exact_bins(rays.take(i, axis=0), planes.take(k, axis=0), planes, bins)
+    for at in range(0, len(rays), chunk):
+        r = np.ascontiguousarray(rays[at:at + chunk])
+        unsure = _kernels.screened_bins(r, planes, centre, a, bins, 1e-5, out[at:at + chunk])
+        k, i = np.divmod(unsure, len(r))
+        if len(i):
+            out[at + i, k] = _exact_bins(r.take(i, axis=0), planes.take(k, axis=0), planes, bins)
     return out
 
 
@@ -277,25 +256,32 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
     beyond = {int(o): (float(b), float(a)) for o, b, a in zip(offs, before, past, strict=True)}
     weighed = (len(rs) - lo - hi) / len(rs) >= 0.8
     rows = np.flatnonzero(weighed)
-    k = r[sub][None, :] + offs[rows, None]  # (W, S) the stripe of each centre at each weighed offset
-    inside = (k >= 0) & (k < n)
-    flat = np.flatnonzero(inside)
-    at = np.repeat(np.arange(len(rows)), np.count_nonzero(inside, axis=1))  # flat // S without a division
-    k = k.ravel().take(flat)
-    # every offset's bins at once, read off those of every thinned centre on every plane: the bin of
-    # centre i = flat - at S on plane k sits at i N + k of the table
     table = table if table is not None else BinTable(rays, planes, bins)
-    pos = flat - at * len(sub)
-    pos *= len(planes)
-    pos += k
-    e = table.rows(sub).ravel().take(pos)
-    cells, hits = _distinct_cells(at, k, e, len(rows), n, deep)
+    cells, hits, counted = _kernels.distinct_cells(r[sub], *table.table(sub), offs[rows], n, deep, 20_000_000)
+    if not counted:  # bins too widely spread for a bitmap
+        cells, hits = _offset_cells(r[sub], table.rows(sub), offs[rows], n, deep)
     conflicts = {int(offs[j]): float(hits[w] / cells[w]) for w, j in enumerate(rows)}
     if not conflicts:
         return None
     if _log.isEnabledFor(logging.DEBUG):
         _log.debug("occlusion conflicts %s", sorted(conflicts.items()))
     return conflicts, beyond
+
+
+def _offset_cells(rel: np.ndarray, rows: np.ndarray, offsets: np.ndarray, n: int, deep: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Per offset (W,): the distinct cells of centres with relative stripes ``rel`` (S,) and elevation
+    bins ``rows`` (S, N) on every plane, and how many are in the sorted keys ``deep``."""
+    k = rel[None, :] + offsets[:, None]  # (W, S) the stripe of each centre at each offset
+    inside = (k >= 0) & (k < n)
+    flat = np.flatnonzero(inside)
+    at = np.repeat(np.arange(len(offsets)), np.count_nonzero(inside, axis=1))  # flat // S without a division
+    k = k.ravel().take(flat)
+    # the bin of centre i = flat - at S on plane k sits at i N + k of rows
+    pos = flat - at * len(rel)
+    pos *= rows.shape[1]
+    pos += k
+    return _distinct_cells(at, k, rows.ravel().take(pos), len(offsets), n, deep)
 
 
 def _distinct_cells(group: np.ndarray, stripe: np.ndarray, e: np.ndarray, groups: int, n: int,

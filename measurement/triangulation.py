@@ -8,6 +8,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from . import _kernels
 from .camera import Intrinsics, ray_grid
 
 
@@ -47,11 +48,20 @@ def rays_at(u: np.ndarray, v: np.ndarray, table: np.ndarray) -> np.ndarray:
 def intersect(rays: np.ndarray, planes: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """Points (M, 3) mm where rays (M, 3) meet planes (M, 4) [n, d] (n.X = d); NaN when parallel.
     out : (M, 3) array for the points (``rays`` itself when the caller no longer needs them)"""
+    if kernel_layout(rays, planes) and len(rays) == len(planes):  # summed as np.einsum sums ray . n
+        return _kernels.intersect(rays, planes, np.empty_like(rays) if out is None else out)
     denom = np.einsum("ij,ij->i", rays, planes[:, :3])
     with np.errstate(divide="ignore", invalid="ignore"):
         s = planes[:, 3] / denom
     s[np.abs(denom) < 1e-9] = np.nan
     return np.multiply(rays, s[:, None], out=out)
+
+
+def kernel_layout(rays: np.ndarray, planes: np.ndarray) -> bool:
+    """Whether np.einsum("ij,ij->i", rays, planes[:, :3]) takes its unit-stride path (three float64
+    products summed (x + z) + y), so that the compiled kernels reproduce it."""
+    return (rays.dtype == planes.dtype == np.float64 and rays.ndim == planes.ndim == 2
+            and rays.strides[1] == planes.strides[1] == 8 and rays.shape[1] == 3 and planes.shape[1] == 4)
 
 
 def depth_on(rays: np.ndarray, planes: np.ndarray) -> np.ndarray:
@@ -78,15 +88,19 @@ def depth_in_range(rays: np.ndarray, planes: np.ndarray, k: np.ndarray, lo: floa
     ``depth_for_labels`` gives it, without that (M, N) matrix: z is formed ray by ray (the same formula,
     rounded another way), and where it lies within that rounding of a bound, or is not finite, the
     matrix's row decides."""
-    p = planes.take(k, axis=0)
-    dot = np.einsum("ij,ij->i", rays, p[:, :3])
-    # both sums of three products err by under 4 ulp of the sum of their magnitudes: a margin 1000 times that
-    size = np.einsum("ij,ij->i", np.abs(rays), np.abs(p[:, :3]))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = p[:, 3] / dot
-        margin = np.abs(z) * 1e-12 * (1 + size / np.abs(dot))
-    out = (z > lo) & (z < hi)
-    unsure = np.flatnonzero(~(np.minimum(np.abs(z - lo), np.abs(z - hi)) > margin))
+    if kernel_layout(rays, planes):  # ray by ray, summed as np.einsum sums
+        out = np.empty(len(rays), bool)
+        unsure = _kernels.depth_screen(rays, planes, k, float(lo), float(hi), out)
+    else:
+        p = planes.take(k, axis=0)
+        dot = np.einsum("ij,ij->i", rays, p[:, :3])
+        # both sums of three products err by under 4 ulp of the sum of their magnitudes: a margin 1000 times that
+        size = np.einsum("ij,ij->i", np.abs(rays), np.abs(p[:, :3]))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = p[:, 3] / dot
+            margin = np.abs(z) * 1e-12 * (1 + size / np.abs(dot))
+        out = (z > lo) & (z < hi)
+        unsure = np.flatnonzero(~(np.minimum(np.abs(z - lo), np.abs(z - hi)) > margin))
     if len(unsure):
         z = depth_for_labels(rays.take(unsure, axis=0), planes)[np.arange(len(unsure)), k[unsure]]
         out[unsure] = (z > lo) & (z < hi)

@@ -1,0 +1,51 @@
+"""Background-plane screening per segment (``measurement.background``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .jit import compiled
+
+
+@compiled
+def near_any_plane(rays, planes, bg_planes, tol_mm, near):
+    """Into ``near`` (m, N) bool: whether ray i's point on light plane k (N, 4) lies within ``tol_mm``
+    of a background plane (P, 4), screened as |z (ray . n) - d|; returns the positions i N + k (U,),
+    sorted, where rounding could decide (within 1e-6 mm of ``tol_mm``, |z| >= 1e5 or not finite),
+    which the exact formula (``background._near_exact``) must settle."""
+    m, n = near.shape
+    unsure = np.empty(m * n, np.int64)
+    u = 0
+    # the planes' columns apart: each ray's loop over the planes runs on vector lanes
+    p0, p1 = np.ascontiguousarray(planes[:, 0]), np.ascontiguousarray(planes[:, 1])
+    p2, p3 = np.ascontiguousarray(planes[:, 2]), np.ascontiguousarray(planes[:, 3])
+    d, z = np.empty(n), np.empty(n)
+    for i in range(m):
+        r0, r1, r2 = rays[i, 0], rays[i, 1], rays[i, 2]
+        for k in range(n):
+            z[k] = p3[k] / (r0 * p0[k] + r1 * p1[k] + r2 * p2[k])
+            d[k] = np.inf
+        for b in range(len(bg_planes)):
+            along = r0 * bg_planes[b, 0] + r1 * bg_planes[b, 1] + r2 * bg_planes[b, 2]
+            for k in range(n):
+                g = abs(z[k] * along - bg_planes[b, 3])
+                d[k] = g if g < d[k] else d[k]  # NaN skipped, as np.fmin skips it
+        for k in range(n):
+            near[i, k] = d[k] < tol_mm
+            if not (abs(d[k] - tol_mm) > 1e-6 and abs(z[k]) < 1e5):
+                unsure[u] = i * n + k
+                u += 1
+    return unsure[:u]
+
+
+@compiled
+def group_counts(flags, starts):
+    """Per group (G,) of rows ``starts[g]:starts[g + 1]`` of ``flags`` (K, N) bool: the True count per
+    column, (G, N) int64 (``np.add.reduceat`` with the rows' end closing the last group)."""
+    g_n, n = len(starts) - 1, flags.shape[1]
+    out = np.zeros((g_n, n), np.int64)
+    for g in range(g_n):
+        for i in range(starts[g], starts[g + 1]):
+            for k in range(n):
+                out[g, k] += flags[i, k]
+    return out

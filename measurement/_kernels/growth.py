@@ -1,0 +1,224 @@
+"""Label growth by depth continuity, its votes and majorities, and the main rows (``measurement.matching``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .jit import compiled
+from .rays import _depth
+
+
+@compiled
+def voting_pairs(own_seg, nb_seg, table, active, relabel):
+    """Positions (K,) of the pairs (own segments, neighbour segments (P,)) that vote: own segment
+    flagged in ``active`` (S,), unlabelled in ``table`` (S,) (labelled with ``relabel``), neighbour's
+    labelled."""
+    out = np.empty(len(own_seg), np.int64)
+    m = 0
+    for p in range(len(own_seg)):
+        if active[own_seg[p]] and table[nb_seg[p]] >= 0 and (table[own_seg[p]] >= 0) == relabel:
+            out[m] = p
+            m += 1
+    return out[:m]
+
+
+@compiled
+def depth_votes(rays, planes, table, cols, at, gaps, tol_mm, n, penalty_mm, step):
+    """The label (K,) each voting pair ``cols[:, at]`` (``matching._Pairs`` rows) casts by depth
+    continuity: the neighbour's label stepped by each gap (toward the voter) whose plane puts the voter
+    nearest the neighbour's depth (extrapolated by ``step`` (K,) mm per stripe when given, else
+    empty), a wider gap paying ``penalty_mm`` per extra stripe; -1 where none is within ``tol_mm``."""
+    best = np.full(len(at), -1, np.int64)
+    for q in range(len(at)):
+        p = at[q]
+        idx, nbr, sign = cols[0, p], cols[1, p], cols[2, p]
+        kn = table[cols[4, p]]
+        zn = _depth(rays, nbr, planes, kn)
+        best_d = np.inf
+        for gap in gaps:
+            k = kn + sign * gap
+            ref = zn + step[q] * gap if len(step) else zn
+            d = abs(_depth(rays, idx, planes, min(max(k, 0), n - 1)) - ref)
+            d = d + (gap - 1) * penalty_mm
+            if 0 <= k < n and d < best_d and d < tol_mm:
+                best[q], best_d = k, d
+    return best
+
+
+@compiled
+def majority(voter, vote, n, min_share):
+    """``matching._majority`` as arrays: segments (G,) and labels (G,) of the segments whose most frequent
+    vote (the earliest cast of a tie) has at least 3 votes and ``min_share`` of their voters, in the
+    order the segments first got a vote. voter : (V,) segment ids; vote : (V,) labels, -1 for none."""
+    support = np.bincount(voter)
+    cast = np.flatnonzero(vote >= 0)
+    key = voter[cast] * (n + 1) + vote[cast]
+    order = np.argsort(key, kind="mergesort")  # stable: a run's first entry was cast first
+    segs = np.empty(len(cast), np.int64)
+    labs = np.empty(len(cast), np.int64)
+    firsts = np.empty(len(cast), np.int64)
+    m = 0
+    j = 0
+    while j < len(order):
+        seg = key[order[j]] // (n + 1)
+        top_cnt, top_lab, top_first, seg_first = 0, -1, 0, len(cast)
+        while j < len(order) and key[order[j]] // (n + 1) == seg:  # the runs of one segment, labels rising
+            a = j
+            while j < len(order) and key[order[j]] == key[order[a]]:
+                j += 1
+            cnt, first = j - a, order[a]
+            seg_first = min(seg_first, first)
+            if cnt > top_cnt or (cnt == top_cnt and first < top_first):
+                top_cnt, top_lab, top_first = cnt, key[order[a]] % (n + 1), first
+        if top_cnt >= 3 and top_cnt >= min_share * support[seg]:
+            segs[m], labs[m], firsts[m] = seg, top_lab, seg_first
+            m += 1
+    by_first = np.argsort(firsts[:m])
+    return segs[:m][by_first], labs[:m][by_first]
+
+
+@compiled
+def grow_by_depth(rays, planes, table, cols, tol_mm, n, gaps, penalty_mm, min_share, rounds):
+    """``matching._grow_all`` by depth continuity alone (no slope, no plane test): rounds of
+    ``depth_votes`` and ``majority`` by the pairs ``cols`` (``matching._Pairs`` rows) of the segments
+    beside one labelled the round before, until none joins; updates ``table`` (S,) and returns the
+    segments (G,) and labels (G,) in the order they joined."""
+    newly = table >= 0
+    out_seg = np.empty(len(table), np.int64)
+    out_lab = np.empty(len(table), np.int64)
+    m = 0
+    no_step = np.zeros(0)
+    for _ in range(rounds):
+        # only segments beside a newly labelled one can vote differently from the round before
+        active = flag_beside(cols[3], cols[4], newly)
+        at = voting_pairs(cols[3], cols[4], table, active, False)
+        if len(at) == 0:
+            break
+        best = depth_votes(rays, planes, table, cols, at, gaps, tol_mm, n, penalty_mm, no_step)
+        segs, labs = majority(cols[3][at], best, n, min_share)
+        if len(segs) == 0:
+            break
+        newly[:] = False
+        for g in range(len(segs)):
+            table[segs[g]] = labs[g]
+            newly[segs[g]] = True
+            out_seg[m], out_lab[m] = segs[g], labs[g]
+            m += 1
+    return out_seg[:m], out_lab[:m]
+
+
+@compiled
+def segment_steps(seg, rays, planes, table, nb, sign, measured, tol_mm, min_rows):
+    """``matching._segment_steps`` for one side: the mean depth step (S,) mm from each centre's row
+    neighbour ``nb`` (M,) (-1 for none) on the next stripe toward ``sign`` to the centre, per segment
+    flagged in ``measured`` (S,); NaN where fewer than ``min_rows`` rows measure one within 2 ``tol_mm``.
+    The steps are summed centre by centre in index order, as np.bincount sums its weights."""
+    cnt = np.zeros(len(table), np.int64)
+    tot = np.zeros(len(table))
+    for i in range(len(seg)):
+        s = seg[i]
+        f = nb[i]
+        if not measured[s] or f < 0:
+            continue
+        k, kf = table[s], table[seg[f]]
+        if kf != k - sign or kf < 0:
+            continue
+        step = _depth(rays, i, planes, k) - _depth(rays, f, planes, kf)
+        if abs(step) < 2 * tol_mm:
+            cnt[s] += 1
+            tot[s] += step
+    out = np.empty(len(table))
+    for s in range(len(table)):
+        out[s] = tot[s] / max(cnt[s], 1) if cnt[s] >= min_rows else np.nan
+    return out
+
+
+@compiled
+def flag_beside(own_seg, nb_seg, flags):
+    """(S,) the segments ``own_seg`` (P,) of the pairs whose neighbour's segment ``nb_seg`` (P,) is
+    flagged in ``flags`` (S,)."""
+    out = np.zeros(len(flags), np.bool_)
+    for p in range(len(own_seg)):
+        if flags[nb_seg[p]]:
+            out[own_seg[p]] = True
+    return out
+
+
+@compiled
+def flag_touching(seg, left, right, flags):
+    """(S,) the segments flagged in ``flags`` (S,) and those with a centre beside one of theirs in its
+    row (``left``, ``right`` (M,): row neighbours, -1 for none)."""
+    out = flags.copy()
+    for i in range(len(seg)):
+        if flags[seg[i]]:
+            if left[i] >= 0:
+                out[seg[left[i]]] = True
+            if right[i] >= 0:
+                out[seg[right[i]]] = True
+    return out
+
+
+@compiled
+def neighbour_pairs(seg, mask, left, right):
+    """``matching._neighbour_pairs``' rows (7, K): for each centre in ``mask`` (M,) whose row neighbour
+    on a side (``left``, then ``right`` (M,), -1 for none) lies in another segment, the centre, that
+    neighbour, the sign of the label step toward the centre (1 from the left, -1 from the right), the
+    segments of both, and the neighbour's own neighbour further out with its segment (-1 where none);
+    the left side's pairs first, each side's in centre order."""
+    count = 0
+    for i in range(len(seg)):
+        if mask[i]:
+            count += (left[i] >= 0 and seg[left[i]] != seg[i]) + (right[i] >= 0 and seg[right[i]] != seg[i])
+    cols = np.empty((7, count), np.int64)
+    p = 0
+    for side in range(2):
+        nb = left if side == 0 else right
+        for i in range(len(seg)):
+            f = nb[i]
+            if mask[i] and f >= 0 and seg[f] != seg[i]:
+                far = nb[f]
+                cols[0, p], cols[1, p], cols[2, p] = i, f, 1 - 2 * side
+                cols[3, p], cols[4, p] = seg[i], seg[f]
+                cols[5, p], cols[6, p] = far, seg[far] if far >= 0 else -1
+                p += 1
+    return cols
+
+
+@compiled
+def gapped_rows(u, order, m, n, window, slack, labels):
+    """``matching._gapped_rows`` row by row: the rows ``order`` (R m,) (m centres each, left to right,
+    columns ``u`` (M,) px) whose gaps are each one or two local spacings (the median gap of the odd
+    ``window`` around it, the row's end gaps repeated), within ``slack``, adding up to n - 1, with a
+    smoothly changing spacing per stripe, get their labels (0, then the running sum of the steps)
+    written into ``labels`` (M,)."""
+    pad = window // 2
+    gaps, r, k, per = np.empty(m - 1), np.empty(m - 1), np.empty(m - 1), np.empty(m - 1)
+    win = np.empty(window)
+    for row in range(len(order) // m):
+        at = order[row * m:(row + 1) * m]
+        for j in range(m - 1):
+            gaps[j] = u[at[j + 1]] - u[at[j]]
+        ok = True
+        total = 0.0
+        for j in range(m - 1):
+            for t in range(window):  # an insertion sort: a handful of values
+                g = gaps[min(max(j - pad + t, 0), m - 2)]
+                q = t
+                while q > 0 and win[q - 1] > g:
+                    win[q] = win[q - 1]
+                    q -= 1
+                win[q] = g
+            r[j] = gaps[j] / max(win[pad], 1e-6)  # the median: the middle value of an odd window
+            k[j] = np.rint(r[j])
+            per[j] = gaps[j] / max(k[j], 1.0)
+            total += k[j]
+            ok &= k[j] >= 1 and k[j] <= 2 and abs(r[j] - k[j]) < slack and gaps[j] > 2
+        for j in range(m - 2):
+            ratio = per[j + 1] / max(per[j], 1e-6)
+            ok &= ratio > 0.7 and ratio < 1.43
+        if ok and total == n - 1:
+            lab = 0
+            labels[at[0]] = 0
+            for j in range(m - 1):
+                lab += np.int64(k[j])
+                labels[at[j + 1]] = lab

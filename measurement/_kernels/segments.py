@@ -1,0 +1,211 @@
+"""Segment linking, change cuts and smoothing along segments (``measurement.segments``)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .jit import compiled
+
+
+@compiled
+def _nearest_shifted(key, shift):
+    """For each entry of sorted ``key`` (K,) float64, the index (K,) of the entry nearest ``key + shift``
+    (the lower of a tie) and the distance (K,): np.searchsorted(key, target) clipped to [1, K - 1], then
+    the nearer of the entries either side (the lower when equally near). The targets
+    are sorted too, so one sweep finds every ``np.searchsorted(key, target)`` ('left')."""
+    n = len(key)
+    best = np.empty(n, np.int64)
+    dist = np.empty(n)
+    p = 0
+    prev = -np.inf
+    for i in range(n):
+        t = key[i] + shift
+        if t < prev:  # not sorted after all: search afresh
+            p = np.searchsorted(key, t)
+        prev = t
+        while p < n and key[p] < t:
+            p += 1
+        hi = min(max(p, 1), n - 1)  # clipped as np.clip does
+        lo = hi - 1 if hi > 0 else n - 1  # numpy's key[-1] when the key holds one entry
+        d_lo, d_hi = abs(key[lo] - t), abs(key[hi] - t)
+        if d_hi < d_lo:
+            best[i], dist[i] = hi, d_hi
+        else:
+            best[i], dist[i] = lo, d_lo
+    return best, dist
+
+
+@compiled
+def _root(parent, i):
+    """Root of ``i`` in the union-find forest ``parent`` (M,), halving the path on the way."""
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@compiled
+def link_components(key, link_px):
+    """Component id (M,) per centre in row order, ``key`` (M,) = row * 1e5 + column (sorted): centres one
+    or two rows apart within ``link_px`` (times the gap) columns, mutual nearest, joined; components
+    numbered by their first centre, as scipy's ``connected_components`` numbers them."""
+    m = len(key)
+    parent = np.arange(m)
+    for gap in (1, 2):
+        down, d = _nearest_shifted(key, gap * 1e5)
+        up, _ = _nearest_shifted(key, -gap * 1e5)
+        for a in range(m):
+            b = down[a]
+            # within reach, and mutual: b's nearest in the row above is a
+            if d[a] <= link_px * gap and up[b] == a:
+                ra, rb = _root(parent, a), _root(parent, b)
+                if ra != rb:
+                    parent[max(ra, rb)] = min(ra, rb)
+    comp = np.empty(m, np.int64)
+    label = np.full(m, -1, np.int64)
+    nxt = 0
+    for i in range(m):
+        r = _root(parent, i)
+        if label[r] < 0:
+            label[r] = nxt
+            nxt += 1
+        comp[i] = label[r]
+    return comp
+
+
+@compiled
+def _prefix(x, a, length, out):
+    """``out[:length + 1]`` = np.r_[0, np.cumsum(x[a:a + length])] (sequential sums)."""
+    out[0] = 0.0
+    for j in range(length):
+        out[j + 1] = out[j] + x[a + j]
+
+
+@compiled
+def _slope(cu, cv, cuv, cvv, lo, hi, n):
+    """Least-squares slope du/dv over the window [lo, hi) of running sums cu, cv, cuv, cvv (0 where
+    the rows' spread is under 1e-9)."""
+    su, sv = cu[hi] - cu[lo], cv[hi] - cv[lo]
+    suv, svv = cuv[hi] - cuv[lo], cvv[hi] - cvv[lo]
+    den = n * svv - sv * sv
+    if den > 1e-9:
+        return (n * suv - su * sv) / max(den, 1e-9)
+    return 0.0
+
+
+@compiled
+def _nan_max(a, b):
+    """np.maximum(a, b) for two floats (NaN wins)."""
+    if a != a:
+        return a
+    if b != b:
+        return b
+    return a if a >= b else b
+
+
+@compiled
+def change_cuts(order, starts, logc, u, v, window, log_ratio, slope_change, out, nxt):
+    """``segments.split_at_changes``'s cuts, written into ``out`` (M,) segment ids: each run
+    ``order[starts[r]:starts[r + 1]]`` (centres of one segment, top down) long enough is scored row by
+    row (brightness jump over ``log_ratio``, direction kink over ``slope_change``) and cut greedily, new
+    ids from ``nxt`` in run order. logc, u, v : (M,) float64 log contrast, columns, rows."""
+    longest = 0
+    for r in range(len(starts) - 1):
+        longest = max(longest, starts[r + 1] - starts[r])
+    cs = np.empty(longest + 1)
+    cu = np.empty(longest + 1)
+    cv = np.empty(longest + 1)
+    cuv = np.empty(longest + 1)
+    cvv = np.empty(longest + 1)
+    x = np.empty((5, longest))
+    score = np.empty(longest)
+    w = window
+    nf = float(window)
+    for r in range(len(starts) - 1):
+        a, length = starts[r], starts[r + 1] - starts[r]
+        if length < 2 * w + 2:
+            continue
+        for j in range(length):
+            i = order[a + j]
+            uu, vv = u[i], v[i]
+            x[0, j], x[1, j], x[2, j], x[3, j], x[4, j] = logc[i], uu, vv, uu * vv, vv * vv
+        _prefix(x[0], 0, length, cs)
+        _prefix(x[1], 0, length, cu)
+        _prefix(x[2], 0, length, cv)
+        _prefix(x[3], 0, length, cuv)
+        _prefix(x[4], 0, length, cvv)
+        k = length - 2 * w
+        any_cut = False
+        for j in range(k):
+            before = (cs[w + j] - cs[j]) / w
+            after = (cs[2 * w + j] - cs[w + j]) / w
+            sb = _slope(cu, cv, cuv, cvv, j, w + j, nf)
+            sa = _slope(cu, cv, cuv, cvv, w + j, 2 * w + j, nf)
+            score[j] = _nan_max(abs(after - before) / log_ratio, abs(sa - sb) / slope_change)
+            any_cut |= score[j] >= 1.0
+        if not any_cut:
+            continue
+        j = 0
+        while True:  # greedy: from each score >= 1 the highest within the window, then past it
+            while j < k and not score[j] >= 1.0:
+                j += 1
+            if j >= k:
+                break
+            top = j
+            for q in range(j + 1, min(j + w, k)):  # np.argmax: the first maximum, or the first NaN
+                if score[top] != score[top]:
+                    break
+                if score[q] > score[top] or score[q] != score[q]:
+                    top = q
+            for q in range(a + w + top, a + length):
+                out[order[q]] = nxt
+            nxt += 1
+            j = top + w
+    return nxt
+
+
+@compiled
+def _median5(a, b, c, d, e):
+    """The median of five floats (finite): the larger of the two smaller of the first four's pairs and
+    the smaller of their larger, then the median of those two and e (the value a sort would pick)."""
+    lo = max(min(a, b), min(c, d))
+    hi = min(max(a, b), max(c, d))
+    return max(min(lo, hi), min(max(lo, hi), e))
+
+
+@compiled
+def smooth_runs(order, starts, u, half, outlier_px, out, keep):
+    """``segments.smooth_along_segments`` run by run: each run ``order[starts[r]:starts[r + 1]]`` (one
+    segment's centres, top down) at least 2 ``half`` + 1 long gets into ``out`` (M,) its columns ``u``
+    (M,) px averaged over +-``half`` rows (edges repeated), a column more than ``outlier_px`` off the
+    median of its window replaced by that median and flagged False in ``keep`` (M,). The sums run as
+    np.cumsum runs them over the edge-padded run, so they round alike."""
+    win = 2 * half + 1
+    longest = 0
+    for r in range(len(starts) - 1):
+        longest = max(longest, starts[r + 1] - starts[r])
+    xp = np.empty(longest + 2 * half)
+    good = np.empty(longest + 2 * half)
+    cs = np.empty(longest + 2 * half + 1)
+    for r in range(len(starts) - 1):
+        a, length = starts[r], starts[r + 1] - starts[r]
+        if length < win:
+            continue
+        for t in range(length + 2 * half):
+            xp[t] = u[order[a + min(max(t - half, 0), length - 1)]]
+        for j in range(length):
+            if win == 5:
+                med = _median5(xp[j], xp[j + 1], xp[j + 2], xp[j + 3], xp[j + 4])
+            else:
+                med = np.sort(xp[j:j + win])[half]
+            x = xp[j + half]
+            if abs(x - med) > outlier_px:
+                good[j] = med
+                keep[order[a + j]] = False
+            else:
+                good[j] = x
+        cs[0] = 0.0
+        for t in range(length + 2 * half):
+            cs[t + 1] = cs[t] + good[min(max(t - half, 0), length - 1)]
+        for j in range(length):
+            out[order[a + j]] = (cs[j + win] - cs[j]) / win

@@ -1,0 +1,129 @@
+"""The compiled kernels against the NumPy forms they replaced, to the bit."""
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
+
+from measurement import _kernels
+from measurement._kernels.rays import _depth
+
+
+def _nearest_key(key, target):
+    hi = np.clip(np.searchsorted(key, target), 1, len(key) - 1)
+    d_lo, d_hi = np.abs(key[hi - 1] - target), np.abs(key[hi] - target)
+    upper = d_hi < d_lo
+    return np.where(upper, hi, hi - 1), np.where(upper, d_hi, d_lo)
+
+
+def _link_reference(key, link_px):
+    src, dst = [], []
+    for gap in (1, 2):
+        best, d = _nearest_key(key, key + gap * 1e5)
+        ok = d <= link_px * gap
+        a, b = np.nonzero(ok)[0], best[ok]
+        mutual = _nearest_key(key, key[b] - gap * 1e5)[0] == a
+        src.append(a[mutual])
+        dst.append(b[mutual])
+    s, d = np.concatenate(src), np.concatenate(dst)
+    graph = csr_matrix((np.ones(len(s)), (s, d)), shape=(len(key), len(key)))
+    return connected_components(graph, directed=False)[1]
+
+
+def test_link_components_numbers_components_as_scipy_does():
+    rng = np.random.default_rng(3)
+    rows = np.sort(rng.integers(0, 300, 4000))
+    u = rng.uniform(0, 400, len(rows)).round(1)
+    order = np.lexsort((u, rows))
+    key = rows[order] * 1e5 + u[order]
+    assert np.array_equal(_kernels.link_components(key, 2.5), _link_reference(key, 2.5))
+
+
+def test_depth_sums_three_products_as_einsum_does():
+    rng = np.random.default_rng(4)
+    rays = rng.normal(size=(5000, 3))
+    rays[:, 2] = 1.0
+    planes = rng.normal(size=(5000, 4)) * [1, 1, 1, 1000]
+    denom = np.einsum("ij,ij->i", rays, planes[:, :3])
+    expected = rays[:, 2] * (planes[:, 3] / denom)
+    got = np.array([_depth(rays, i, planes, i) for i in range(len(rays))])
+    assert np.array_equal(got, expected)
+
+
+def _majority_reference(voter, vote, n, min_share):
+    cast = np.nonzero(vote >= 0)[0]
+    if len(cast) == 0:
+        return {}
+    support = np.bincount(voter)
+    pair, first, cnt = np.unique(voter[cast] * (n + 1) + vote[cast], return_index=True, return_counts=True)
+    segs, labs = pair // (n + 1), pair % (n + 1)
+    order = np.lexsort((first, -cnt, segs))
+    best = order[np.r_[True, segs[order][1:] != segs[order][:-1]]]
+    best = best[(cnt[best] >= 3) & (cnt[best] >= min_share * support[segs[best]])]
+    seg_first = np.full(len(support), len(cast))
+    np.minimum.at(seg_first, segs, first)
+    best = best[np.argsort(seg_first[segs[best]])]
+    return dict(zip(segs[best].tolist(), labs[best].tolist(), strict=True))
+
+
+def test_majority_keeps_the_earliest_cast_of_a_tie_and_the_first_voted_order():
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        voter = rng.integers(0, 40, 600)
+        vote = rng.integers(-1, 4, 600)
+        segs, labs = _kernels.majority(voter, vote, 4, 0.4)
+        got = dict(zip(segs.tolist(), labs.tolist(), strict=True))
+        expected = _majority_reference(voter, vote, 4, 0.4)
+        assert got == expected and list(got) == list(expected)
+
+
+def test_intersect_matches_the_einsum_formula_to_the_bit():
+    from measurement.triangulation import intersect
+
+    def numpy_form(rays, planes):
+        denom = np.einsum("ij,ij->i", rays, planes[:, :3])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = planes[:, 3] / denom
+        s[np.abs(denom) < 1e-9] = np.nan
+        return rays * s[:, None]
+
+    rng = np.random.default_rng(6)
+    rays = rng.normal(size=(4000, 3))
+    rays[:, 2] = 1.0
+    planes = rng.normal(size=(4000, 4)) * [1, 1, 1, 1000]
+    planes[:5, :3] = 0.0  # parallel: NaN
+    assert np.array_equal(intersect(rays, planes), numpy_form(rays, planes), equal_nan=True)
+    # np.einsum sums a column-major array's rows another way: that layout keeps the NumPy code
+    fortran = np.asfortranarray(rays)
+    assert np.array_equal(intersect(fortran, planes), numpy_form(fortran, planes), equal_nan=True)
+
+
+def _gapped_reference(u, order, m, n, labels, window=7, slack=0.2):
+    gaps = np.diff(u[order].reshape(-1, m), axis=1)
+    pad = window // 2
+    windows = np.lib.stride_tricks.sliding_window_view(np.pad(gaps, ((0, 0), (pad, pad)), mode="edge"), window,
+                                                      axis=1)
+    r = gaps / np.maximum(np.median(windows, axis=2), 1e-6)
+    k = np.rint(r)
+    per_stripe = gaps / np.maximum(k, 1)
+    ratio = per_stripe[:, 1:] / np.maximum(per_stripe[:, :-1], 1e-6)
+    ok = (((k >= 1) & (k <= 2) & (np.abs(r - k) < slack)).all(axis=1) & (k.sum(axis=1) == n - 1)
+          & (gaps > 2).all(axis=1) & ((ratio > 0.7) & (ratio < 1.43)).all(axis=1))
+    steps = k[ok].astype(np.int64)
+    lab = np.concatenate([np.zeros((len(steps), 1), np.int64), np.cumsum(steps, axis=1)], axis=1)
+    labels[order.reshape(-1, m)[ok].ravel()] = lab.ravel()
+
+
+def test_gapped_rows_label_the_rows_the_numpy_form_labels():
+    rng = np.random.default_rng(7)
+    n, m, rows = 40, 37, 300
+    steps = np.ones((rows, m - 1))
+    for row in steps:  # three missing stripes each, sometimes a fourth
+        row[rng.choice(m - 1, 3 + (rng.random() < 0.3), replace=False)] = 2
+    u = np.cumsum(np.concatenate([rng.uniform(0, 50, (rows, 1)), steps * 20 + rng.normal(0, 2.5, steps.shape)],
+                                 axis=1), axis=1).ravel()
+    order = np.arange(len(u))
+    got, expected = np.full(len(u), -1), np.full(len(u), -1)
+    _kernels.gapped_rows(u, order, m, n, 7, 0.2, got)
+    _gapped_reference(u, order, m, n, expected)
+    assert (expected >= 0).any() and (expected < 0).any()
+    assert np.array_equal(got, expected)
