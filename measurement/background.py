@@ -109,9 +109,17 @@ def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, mi
     counts = np.diff(starts)[one]
     dist = _plane_distance(intersect(rays.take(members, axis=0), planes.take(np.repeat(k, counts), axis=0)),
                            bg_planes)
-    med = np.array([np.median(part) for part in np.split(dist, np.cumsum(counts)[:-1])])
-    flat = med <= flatness * _background_flatness(rays, planes, seg, seg_label, bg_planes)
+    flat = _group_medians(dist, counts) <= flatness * _background_flatness(rays, planes, seg, seg_label, bg_planes)
     return dict(zip(sids[one][flat].tolist(), k[flat].tolist(), strict=True))
+
+
+def _group_medians(x: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """np.median of each run of ``x`` (K,) in turn, the runs ``counts`` (G,) long (each at least 1): one
+    sort instead of a call per run."""
+    group = np.repeat(np.arange(len(counts)), counts)
+    s = x[np.lexsort((x, group))]
+    start = np.r_[0, np.cumsum(counts)[:-1]]
+    return (s[start + (counts - 1) // 2] + s[start + counts // 2]) / 2
 
 
 def _plane_distance(points: np.ndarray, bg_planes: np.ndarray) -> np.ndarray:

@@ -299,3 +299,14 @@ def test_a_floor_claim_must_be_as_flat_as_the_labelled_floor():
     assert claims == {3: 20}
     assert claim_background(None, rays, planes, seg, {0: 5, 1: 6, 2: 7}, np.ones(len(seg), bool), floor, n,
                             flatness=np.inf) == {3: 20, 4: 25}
+
+
+def test_group_medians_equal_numpy_median_per_run():
+    from measurement.background import _group_medians
+
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        counts = rng.integers(1, 60, rng.integers(1, 30))
+        x = rng.random(counts.sum()) * 5
+        expected = [np.median(part) for part in np.split(x, np.cumsum(counts)[:-1])]
+        assert _group_medians(x, counts).tolist() == expected
