@@ -163,6 +163,8 @@ class Labels:
     background : (P, 4) planes [n, d] of the floor / wall (mm), or None
     pieces     : centres in the pieces off the floor and wall that were weighed for an index
     unplaced   : of those, centres left without one (no evidence fixed the piece's absolute index)
+    faint_shadow : the animal's first piece was placed from a shallow conflict ramp (its shadow's lit edge
+                 mostly hidden): right on 3 of 4 such renders, but weaker evidence than usual
     """
 
     stripe: np.ndarray
@@ -170,6 +172,7 @@ class Labels:
     segment: np.ndarray | None = None
     pieces: int = 0
     unplaced: int = 0
+    faint_shadow: bool = False
 
 
 def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple[int, int],
@@ -211,7 +214,7 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     bg_cl = _labels_of(seg, seg_label, long_seg)
     bg_lit = lit_cells(rays, planes, bg_cl, np.flatnonzero(bg_cl >= 0))
     table = BinTable(rays, planes)  # the pieces' elevation bins, shared by every conflict curve below
-    fg_labels, small, cl, lit, first = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol,
+    fg_labels, small, cl, lit, first, shallow = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol,
                                                    n, weighed, params.depth_range_mm, bg_planes, bg_lit,
                                                    pairs, table)
     if fg_labels:
@@ -230,7 +233,10 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
                                          0.25 * spacing_mm, lit))
     if fg_labels and small:  # isolated small pieces (a head seen from above) hemmed in by what is placed
         seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit, table))
-    if fg_labels and first is not None:  # the whole animal weighed again, with what joined after the first piece
+    # the whole animal weighed again, with what joined after the first piece (not after a shallow reading:
+    # the grown union's stray conflicts outweigh such a ramp; a spot cow seen from above was placed right
+    # and then moved one stripe)
+    if fg_labels and first is not None and not shallow:
         fg = {s: k for s, k in seg_label.items() if s not in bg_labels}
         shift = _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg, fg_mask, fg_pairs, long_seg, left,
                                     right, tol, n, bg_planes, first, table)
@@ -243,21 +249,19 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     at = np.flatnonzero(ok)
     labels[at[~depth_in_range(rays.take(at, axis=0), planes, labels[at], *params.depth_range_mm)]] = -1
     labels = _enforce_row_order(c, labels, order)
-    return Labels(labels, bg_planes, seg, int(weighed.sum()), int((weighed & (labels < 0)).sum()))
+    return Labels(labels, bg_planes, seg, int(weighed.sum()), int((weighed & (labels < 0)).sum()), shallow)
 
 
 def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, weighed, zrange,
                 bg_planes, bg_lit, pairs: _Pairs, table: BinTable
-                ) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None]:
+                ) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None, bool]:
     """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
     (M,) the centres of every piece that was weighed for an offset. ``bg_lit`` : the projector cells lit
     at the labels of ``seg_label`` (``lit_cells``); ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``;
     ``table`` : the ``BinTable`` the conflict curves share.
     Also returns the per-centre labels (M,) of the background and the placed pieces, the projector cells
-    they light (``lit_cells``) and the centres (K,) of the first piece placed (None if none was, or if it
-    was read off a steady shallow ramp: the whole-animal weighing then stays off, since the stray conflicts
-    of the grown union outweigh such a ramp; a spot cow seen from above was placed right and then moved).
-    Pieces whose curve is a steady but shallow ramp are read at its minimum (``choose_offset``).
+    they light (``lit_cells``), the centres (K,) of the first piece placed (None if none was), and whether
+    that piece's offset was read off a steady but shallow ramp (``choose_offset``): weak evidence.
 
     Each piece (``_pieces``) is placed from its conflict curve, largest first, with the pieces placed
     before it counting as lit: the largest carries the most shadow evidence, and the first piece placed
@@ -300,7 +304,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
             first = idx
             first_shallow = bool(reading.get("shallow"))
         placed_max = max(placed_max, len(idx))
-    return out, small, cl, lit, None if first_shallow else first
+    return out, small, cl, lit, first, first_shallow
 
 
 def _pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pairs: _Pairs, mid: int

@@ -137,6 +137,16 @@ def test_a_scan_says_when_the_animal_could_not_be_placed(small_capture, monkeypa
     assert any("could not be matched to a light plane" in w for w in r.measurements["warnings"])
 
 
+def test_a_faint_shadow_reading_is_named_in_the_warnings():
+    from measurement.matching import Labels
+    from measurement.pipeline import _warnings
+
+    meas = {"body_length_mm": 500.0, "body_height_mm": 280.0}
+    assert _warnings(meas, Labels(np.zeros(3, np.int64), None, None, 100, 0)) == []
+    warned = _warnings(meas, Labels(np.zeros(3, np.int64), None, None, 100, 0, faint_shadow=True))
+    assert len(warned) == 1 and "faint shadow" in warned[0] and "off by one stripe" in warned[0]
+
+
 def test_sixteen_bit_and_colour_frames_scan_as_their_eight_bit_gray(small_capture, truth_cal):
     """A 16-bit camera frame (the same light, x257) or a 3-channel one gives the same cloud."""
     img = read_image(small_capture / "scan" / "side.png")
