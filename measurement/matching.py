@@ -116,7 +116,13 @@ def _gapped_rows(c: Centres, order: np.ndarray, m: int, n: int, labels: np.ndarr
     if window % 2:  # the median is one of the gaps: row by row, compiled
         _kernels.gapped_rows(c.u, order, m, n, window, slack, labels)
         return
-    gaps = np.diff(c.u[order].reshape(-1, m), axis=1)  # (R, m - 1) pixels
+    gapped_rows_numpy(c.u, order, m, n, labels, window, slack)
+
+
+def gapped_rows_numpy(u: np.ndarray, order: np.ndarray, m: int, n: int, labels: np.ndarray, window: int,
+                      slack: float) -> None:
+    """``_gapped_rows`` in NumPy, for the centres' columns u (M,): any window (the kernel's reference)."""
+    gaps = np.diff(u[order].reshape(-1, m), axis=1)  # (R, m - 1) pixels
     pad = window // 2
     windows = np.lib.stride_tricks.sliding_window_view(np.pad(gaps, ((0, 0), (pad, pad)), mode="edge"), window,
                                                       axis=1)

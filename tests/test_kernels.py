@@ -6,6 +6,7 @@ from scipy.sparse.csgraph import connected_components
 
 from measurement import _kernels
 from measurement._kernels.rays import _depth
+from measurement.matching import gapped_rows_numpy
 
 
 def _nearest_key(key, target):
@@ -97,22 +98,6 @@ def test_intersect_matches_the_einsum_formula_to_the_bit():
     assert np.array_equal(intersect(fortran, planes), numpy_form(fortran, planes), equal_nan=True)
 
 
-def _gapped_reference(u, order, m, n, labels, window=7, slack=0.2):
-    gaps = np.diff(u[order].reshape(-1, m), axis=1)
-    pad = window // 2
-    windows = np.lib.stride_tricks.sliding_window_view(np.pad(gaps, ((0, 0), (pad, pad)), mode="edge"), window,
-                                                      axis=1)
-    r = gaps / np.maximum(np.median(windows, axis=2), 1e-6)
-    k = np.rint(r)
-    per_stripe = gaps / np.maximum(k, 1)
-    ratio = per_stripe[:, 1:] / np.maximum(per_stripe[:, :-1], 1e-6)
-    ok = (((k >= 1) & (k <= 2) & (np.abs(r - k) < slack)).all(axis=1) & (k.sum(axis=1) == n - 1)
-          & (gaps > 2).all(axis=1) & ((ratio > 0.7) & (ratio < 1.43)).all(axis=1))
-    steps = k[ok].astype(np.int64)
-    lab = np.concatenate([np.zeros((len(steps), 1), np.int64), np.cumsum(steps, axis=1)], axis=1)
-    labels[order.reshape(-1, m)[ok].ravel()] = lab.ravel()
-
-
 def test_gapped_rows_label_the_rows_the_numpy_form_labels():
     rng = np.random.default_rng(7)
     n, m, rows = 40, 37, 300
@@ -124,6 +109,6 @@ def test_gapped_rows_label_the_rows_the_numpy_form_labels():
     order = np.arange(len(u))
     got, expected = np.full(len(u), -1), np.full(len(u), -1)
     _kernels.gapped_rows(u, order, m, n, 7, 0.2, got)
-    _gapped_reference(u, order, m, n, expected)
+    gapped_rows_numpy(u, order, m, n, expected, 7, 0.2)
     assert (expected >= 0).any() and (expected < 0).any()
     assert np.array_equal(got, expected)
