@@ -39,8 +39,17 @@ def background_planes(rays: np.ndarray, planes: np.ndarray, labels: np.ndarray, 
 
 def near_planes(points: np.ndarray, bg_planes: np.ndarray, tol_mm: float = 8.0) -> np.ndarray:
     """(M,) True where a point lies within ``tol_mm`` of any background plane."""
-    d = np.abs(points @ bg_planes[:, :3].T - bg_planes[:, 3])
-    return np.nan_to_num(d, nan=np.inf).min(axis=1) < tol_mm
+    return _below_any(np.abs(points @ bg_planes[:, :3].T - bg_planes[:, 3]), tol_mm)
+
+
+def _below_any(d: np.ndarray, tol_mm: float) -> np.ndarray:
+    """(K,) True where some column of the distances d (K, P) is below ``tol_mm`` (NaN never is): the
+    answer of ``np.nan_to_num(d, nan=np.inf).min(axis=1) < tol_mm`` column by column, several times faster
+    than a reduction along an axis of one or two."""
+    out = d[:, 0] < tol_mm
+    for j in range(1, d.shape[1]):
+        out |= d[:, j] < tol_mm
+    return out
 
 
 def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray, tol_mm: float,
@@ -65,8 +74,7 @@ def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray,
 
 def _near_exact(points: np.ndarray, normals: np.ndarray, d: np.ndarray, tol_mm: float) -> np.ndarray:
     """(K,) True where points (K, 3) lie within ``tol_mm`` of a plane (normals (3, P), offsets (P,))."""
-    dist = np.abs(points @ normals - d)
-    return np.nan_to_num(dist, nan=np.inf).min(axis=1) < tol_mm
+    return _below_any(np.abs(points @ normals - d), tol_mm)
 
 
 def _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm):
@@ -124,7 +132,8 @@ def _group_medians(x: np.ndarray, counts: np.ndarray) -> np.ndarray:
 
 def _plane_distance(points: np.ndarray, bg_planes: np.ndarray) -> np.ndarray:
     """Distance (K,) mm of points (K, 3) from the nearest of the background planes (P, 4)."""
-    return np.abs(points @ bg_planes[:, :3].T - bg_planes[:, 3]).min(axis=1)
+    d = np.abs(points @ bg_planes[:, :3].T - bg_planes[:, 3])
+    return np.minimum.reduce(list(d.T)) if d.shape[1] > 1 else d[:, 0]  # as min(axis=1), faster over two
 
 
 def _background_flatness(rays, planes, seg, seg_label: dict[int, int], bg_planes, most: int = 20000) -> float:

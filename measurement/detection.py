@@ -188,7 +188,11 @@ def noise_sigma(g: np.ndarray) -> float:
         return 0.0
     rows = np.arange(0, h - 1, 8)
     d = g[rows + 1, ::4].astype(np.int16) - g[rows, ::4]
-    return float(np.median(np.abs(d))) / (0.6745 * np.sqrt(2.0))
+    # np.median of the integers 0..255 from their counts: the mean of the two middle ones, exactly
+    below = np.cumsum(np.bincount(np.abs(d).ravel(), minlength=256))
+    n = int(below[-1])
+    middle = np.searchsorted(below, [(n - 1) // 2, n // 2], side="right")
+    return float(middle.sum()) / 2 / (0.6745 * np.sqrt(2.0))
 
 
 def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams
@@ -210,12 +214,14 @@ def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams
     # on a flat-topped peak keep only its first pixel: strictly brighter than the left neighbour
     first = np.zeros_like(cand)
     first[:, 1:] = cv2.compare(s[:, 1:], s[:, :-1], cv2.CMP_GT)
-    pts = cv2.findNonZero(cv2.bitwise_and(cand, first))
-    if pts is None:
+    # the peaks in raster order, as cv2.findNonZero lists them: NumPy finds them in a 0/1 mask viewed as
+    # bool several times faster
+    at = np.flatnonzero(np.bitwise_and(cv2.bitwise_and(cand, first), 1).view(bool))
+    if len(at) == 0:
         none = np.zeros(0, np.float32)
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), none, none, none
-    pts = pts.reshape(-1, 2)
-    x, y = pts[:, 0].astype(np.int64), pts[:, 1].astype(np.int64)
+    y = at // w
+    x = at - y * w
     u, width, flank = _refine(s, bg, x, y, _scaled(params.background_px, w) // 2 + 1)
     return x, y + a, u, contrast[y, x].astype(np.float32), width, flank
 
@@ -223,7 +229,7 @@ def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams
 def _linked(x: np.ndarray, y: np.ndarray, w: int, strong: np.ndarray, weak: np.ndarray, link: float
             ) -> np.ndarray:
     """(M,) bool: weak candidates joined to a strong one through weak ones, row to row (one or two rows
-    apart, within ``link`` columns). x, y : (M,) int64 pixels in raster order (as cv2.findNonZero gives)."""
+    apart, within ``link`` columns). x, y : (M,) int64 pixels in raster order (as the bands list them)."""
     from scipy.sparse import csr_matrix
     from scipy.sparse.csgraph import connected_components
 

@@ -66,7 +66,11 @@ class BinTable:
 
     def __init__(self, rays: np.ndarray, planes: np.ndarray, bins: float = 0.002) -> None:
         self.rays, self.planes, self.bins = rays, planes, bins
-        self._data = np.empty((0, len(planes)), np.int64)  # the rows computed so far, in that order
+        # the rows computed so far, in that order, are the first _rows of _data: room for every centre,
+        # its pages faulted in only as rows are written (growing one array by concatenation copied it
+        # all on each call)
+        self._data = np.empty((len(rays), len(planes)), np.int64)
+        self._rows = 0
         self._slot = np.full(len(rays), -1, np.int64)  # each centre's row in _data, -1 before
 
     def rows(self, idx: np.ndarray) -> np.ndarray:
@@ -76,13 +80,14 @@ class BinTable:
 
     def table(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The rows computed so far (R, N) and the row (K,) of each of the distinct centres ``idx`` (K,)
-        among them: a compact table (one (M, N) array would fault in most of its pages)."""
+        among them: a compact table (one (M, N) array indexed by centre would fault in most of its pages)."""
         new = idx[self._slot[idx] < 0]
         if len(new):
-            self._slot[new] = np.arange(len(self._data), len(self._data) + len(new))
-            self._data = np.concatenate([self._data, _bins_on_planes(self.rays.take(new, axis=0), self.planes,
-                                                                     self.bins)])
-        return self._data, self._slot[idx]
+            r = self._rows
+            self._slot[new] = np.arange(r, r + len(new))
+            self._data[r:r + len(new)] = _bins_on_planes(self.rays.take(new, axis=0), self.planes, self.bins)
+            self._rows = r + len(new)
+        return self._data[:self._rows], self._slot[idx]
 
 
 def _bins_on_planes(rays: np.ndarray, planes: np.ndarray, bins: float, chunk: int = 2048) -> np.ndarray:

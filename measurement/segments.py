@@ -3,7 +3,6 @@ denoised (Algorithm 3) and smoothed along the stripe."""
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from . import _kernels
@@ -19,13 +18,8 @@ def denoise(c: Centres, shape: tuple[int, int]) -> np.ndarray:
     wdt = int(np.clip(round(float(np.median(c.width))), 3, 25))
     h, w = shape
     ui = np.clip(np.rint(c.u).astype(np.int64), 0, w - 1)
-    flat = c.v.astype(np.int64) * w + ui
-    mask = np.zeros(h * w, np.uint8)
-    mask[flat] = 1
-    # integer counts saturating at 255: the threshold is at most 12.5, so the answer is the exact count's
-    counts = cv2.boxFilter(mask.reshape(h, w), cv2.CV_8U, (wdt, wdt), normalize=False,
-                           borderType=cv2.BORDER_CONSTANT)
-    return counts.ravel()[flat] >= 0.5 * wdt
+    # the counts a full-frame box filter over a mask of the centres gives, taken at the centres only
+    return _kernels.crowded(c.v.astype(np.int64), ui, h, wdt)
 
 
 def link_segments(c: Centres, link_px: float, order: np.ndarray | None = None) -> np.ndarray:

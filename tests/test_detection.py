@@ -220,3 +220,14 @@ def test_a_faint_stripe_under_a_noisy_sensor_is_found_at_full_resolution():
     assert np.bincount(c.v, minlength=120).max() <= 40
     old = detect_centres(img, DetectionParams(min_contrast=2.5 * noise_sigma(img), noise_k=0.0))
     assert len(old) < 0.7 * 40 * 120
+
+
+def test_noise_sigma_takes_the_median_np_median_takes():
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        g = rng.integers(0, 256, tuple(rng.integers(2, 40, 2))).astype(np.uint8)
+        if rng.random() < 0.3:  # few distinct levels: the two middle differences often differ
+            g = (g // 128 * rng.integers(1, 128)).astype(np.uint8)
+        rows = np.arange(0, g.shape[0] - 1, 8)
+        d = np.abs(g[rows + 1, ::4].astype(np.int16) - g[rows, ::4])
+        assert noise_sigma(g) == float(np.median(d)) / (0.6745 * np.sqrt(2.0))

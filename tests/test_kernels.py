@@ -1,5 +1,6 @@
 """The compiled kernels against the NumPy forms they replaced, to the bit."""
 
+import cv2
 import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
@@ -112,3 +113,22 @@ def test_gapped_rows_label_the_rows_the_numpy_form_labels():
     gapped_rows_numpy(u, order, m, n, expected, 7, 0.2)
     assert (expected >= 0).any() and (expected < 0).any()
     assert np.array_equal(got, expected)
+
+
+def _crowded_reference(row, col, h, w, size):
+    mask = np.zeros((h, w), np.uint8)
+    mask[row, col] = 1
+    counts = cv2.boxFilter(mask, cv2.CV_8U, (size, size), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    return counts[row, col] >= 0.5 * size
+
+
+def test_crowded_counts_as_the_full_frame_box_filter_does():
+    rng = np.random.default_rng(5)
+    for size in (3, 4, 8, 13, 25):
+        for _ in range(40):
+            h, w = (int(n) for n in rng.integers(1, 50, 2))
+            m = int(rng.integers(1, 300))
+            # repeated pixels, the frame's edges and rows far from uniform
+            row = np.minimum(rng.integers(0, h, m), rng.integers(0, h, m))
+            col = rng.integers(0, w, m)
+            assert np.array_equal(_kernels.crowded(row, col, h, size), _crowded_reference(row, col, h, w, size))

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from measurement.background import near_planes
 from measurement.calibration import load_calibration
 from measurement.detection import detect_centres
 from measurement.images import read_image
@@ -310,3 +311,14 @@ def test_group_medians_equal_numpy_median_per_run():
         x = rng.random(counts.sum()) * 5
         expected = [np.median(part) for part in np.split(x, np.cumsum(counts)[:-1])]
         assert _group_medians(x, counts).tolist() == expected
+
+
+def test_near_planes_answers_as_the_nearest_plane_distance_does():
+    rng = np.random.default_rng(2)
+    points = rng.uniform(-50, 50, (3000, 3))
+    points[::97, 1] = np.nan  # a ray parallel to its plane: never near
+    for count in (1, 2, 3):
+        bg = np.c_[rng.normal(size=(count, 3)), rng.uniform(-5, 5, count)]
+        d = np.abs(points @ bg[:, :3].T - bg[:, 3])
+        expected = np.nan_to_num(d, nan=np.inf).min(axis=1) < 8.0
+        assert np.array_equal(near_planes(points, bg, 8.0), expected)

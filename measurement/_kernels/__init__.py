@@ -23,10 +23,11 @@ from .growth import (
 )
 from .offsets import distinct_cells, screened_bins
 from .rays import depth_screen, intersect, neighbour_distances
-from .segments import change_cuts, link_components, smooth_runs
+from .segments import change_cuts, crowded, link_components, smooth_runs
 
 __all__ = [
     "change_cuts",
+    "crowded",
     "depth_screen",
     "depth_votes",
     "distinct_cells",

@@ -209,3 +209,55 @@ def smooth_runs(order, starts, u, half, outlier_px, out, keep):
             cs[t + 1] = cs[t] + good[min(max(t - half, 0), length - 1)]
         for j in range(length):
             out[order[a + j]] = (cs[j + win] - cs[j]) / win
+
+
+@compiled
+def crowded(row, col, h, size):
+    """Whether each centre's pixel (``row``, ``col``) (M,) int64 has at least ``size / 2`` marked pixels in
+    the ``size`` x ``size`` square OpenCV's unnormalised ``boxFilter`` sums there (anchor ``size // 2``,
+    zero border) over a mask of ``h`` rows marking every centre's pixel once: the same counts, read off
+    the centres' columns row by row instead of summed over the whole frame."""
+    m = len(row)
+    start = np.zeros(h + 1, np.int64)
+    for i in range(m):
+        start[row[i] + 1] += 1
+    for r in range(h):
+        start[r + 1] += start[r]
+    who = np.empty(m, np.int64)  # the centres row by row
+    fill = start[:h].copy()
+    for i in range(m):
+        who[fill[row[i]]] = i
+        fill[row[i]] += 1
+    cols = np.empty(m, np.int64)
+    end = np.empty(h, np.int64)
+    for r in range(h):
+        a, b = start[r], start[r + 1]
+        # each row's centres by column (insertion: detection yields them nearly so); its columns without
+        # repeats (a pixel counts once)
+        for j in range(a + 1, b):
+            x = who[j]
+            k = j
+            while k > a and col[who[k - 1]] > col[x]:
+                who[k] = who[k - 1]
+                k -= 1
+            who[k] = x
+        k = a
+        for j in range(a, b):
+            if j == a or col[who[j]] != cols[k - 1]:
+                cols[k] = col[who[j]]
+                k += 1
+        end[r] = k
+    half = size // 2
+    n = np.zeros(m, np.int64)
+    for v in range(h):
+        for r in range(max(v - half, 0), min(v - half + size, h)):
+            # the squares' column bounds rise along the row: two pointers sweep row r once
+            p0, p1 = start[r], start[r]
+            for j in range(start[v], start[v + 1]):
+                i = who[j]
+                while p0 < end[r] and cols[p0] < col[i] - half:
+                    p0 += 1
+                while p1 < end[r] and cols[p1] < col[i] - half + size:
+                    p1 += 1
+                n[i] += p1 - p0
+    return 2 * n >= size
