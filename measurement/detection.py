@@ -16,6 +16,7 @@ from __future__ import annotations
 import os
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import cv2
 import numpy as np
@@ -82,6 +83,12 @@ class Centres:
 
     def __len__(self) -> int:
         return len(self.u)
+
+    @cached_property
+    def median_width(self) -> float:
+        """np.median of ``width`` (pixels), taken once: the reliability test reads it in matching and again
+        in the pipeline. (The arrays are not to be changed in place after it is read.)"""
+        return float(np.median(self.width))
 
     def take(self, mask: np.ndarray) -> Centres:
         flank = None if self.flank is None else self.flank[mask]
@@ -269,7 +276,7 @@ def reliable(c: Centres, params: DetectionParams = DetectionParams()) -> np.ndar
     if c.flank is not None:
         ok &= c.flank >= np.maximum(params.min_flank, params.flank_ratio * c.contrast)
     if len(c) and params.max_width > 0:
-        ok &= c.width <= params.max_width * float(np.median(c.width))
+        ok &= c.width <= params.max_width * c.median_width
     return ok
 
 

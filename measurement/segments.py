@@ -15,7 +15,7 @@ def denoise(c: Centres, shape: tuple[int, int]) -> np.ndarray:
     light only a few. returns (M,) bool keep-mask."""
     if len(c) == 0:
         return np.zeros(0, bool)
-    wdt = int(np.clip(round(float(np.median(c.width))), 3, 25))
+    wdt = int(np.clip(round(c.median_width), 3, 25))
     h, w = shape
     ui = np.clip(np.rint(c.u).astype(np.int64), 0, w - 1)
     # the counts a full-frame box filter over a mask of the centres gives, taken at the centres only

@@ -30,6 +30,14 @@ def ray_table(intr: Intrinsics) -> np.ndarray:
 def rays_at(u: np.ndarray, v: np.ndarray, table: np.ndarray) -> np.ndarray:
     """Rays (M, 3) with z = 1 through sub-pixel columns ``u`` (M,) of integer rows ``v`` (M,), by linear
     interpolation along the row of the ray table (rows are exact)."""
+    u = np.asarray(u)
+    if u.dtype == np.float64 and table.dtype == np.float32 and table.flags.c_contiguous:  # one fused pass
+        return _kernels.rays_at(u, np.asarray(v), table.reshape(-1, 2), table.shape[1], np.empty((len(u), 3)))
+    return _rays_interpolated(u, v, table)
+
+
+def _rays_interpolated(u: np.ndarray, v: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """``rays_at`` in numpy: the arithmetic the compiled kernel repeats."""
     w = table.shape[1]
     u0 = np.clip(np.floor(u).astype(np.int64), 0, w - 2)
     f = u - u0

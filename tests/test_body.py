@@ -72,3 +72,15 @@ def test_background_margin_follows_the_planes_noise():
     assert background_margin(quiet) == 3.0  # 10 sigma = 2 mm, never under 3 mm
     assert abs(background_margin(noisy) - 8.0) < 0.5  # 10 sigma
     assert background_margin(np.abs(rng.normal(0, 5.0, 5000))) == 12.0  # never over background_mm
+
+
+def test_column_medians_equal_np_median_bit_for_bit():
+    from measurement.body import _column_medians
+
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 3, 4, 57, 100, 733):
+        x = rng.normal(500.0, 80.0, (n, 3)).round(rng.integers(0, 4))  # ties too
+        assert _column_medians(x).tobytes() == np.median(x, axis=0).tobytes()
+    x = rng.normal(size=(9, 3))
+    x[4, 1] = np.nan
+    assert np.array_equal(_column_medians(x), np.median(x, axis=0), equal_nan=True)

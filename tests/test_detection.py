@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from measurement.detection import (
+    Centres,
     DetectionParams,
     algorithm2_boundaries,
     algorithm2_centres,
@@ -231,3 +232,13 @@ def test_noise_sigma_takes_the_median_np_median_takes():
         rows = np.arange(0, g.shape[0] - 1, 8)
         d = np.abs(g[rows + 1, ::4].astype(np.int16) - g[rows, ::4])
         assert noise_sigma(g) == float(np.median(d)) / (0.6745 * np.sqrt(2.0))
+
+
+def test_the_median_width_is_np_median_of_the_widths_read_once():
+    rng = np.random.default_rng(2)
+    for n in (1, 2, 7, 1000):
+        width = rng.integers(2, 18, n).astype(np.float32)
+        c = Centres(rng.uniform(0, 100, n), np.arange(n, dtype=np.int32), np.ones(n, np.float32), width)
+        assert c.median_width == float(np.median(width))
+        assert "median_width" in vars(c)  # cached: the reliability test and denoising read it again
+        assert c.take(np.arange(n) % 2 == 0).median_width == float(np.median(width[::2]))

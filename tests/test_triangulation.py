@@ -1,6 +1,7 @@
 """Line-plane triangulation: project <-> triangulate round trips on a distorted camera."""
 
 import numpy as np
+import pytest
 
 from measurement.camera import Intrinsics, project
 from measurement.triangulation import depth_for_labels, intersect, ray_table, rays_at
@@ -44,3 +45,19 @@ def test_depth_for_labels_grows_with_the_stripe_index_on_a_fan_of_planes():
 def test_a_ray_parallel_to_its_plane_gives_nan():
     out = intersect(np.array([[0.0, 0.0, 1.0]]), np.array([[1.0, 0.0, 0.0, 5.0]]))
     assert np.isnan(out).all()
+
+
+def test_compiled_rays_at_equals_the_numpy_interpolation_bit_for_bit():
+    from measurement.triangulation import _rays_interpolated
+
+    table = ray_table(_camera())
+    rng = np.random.default_rng(5)
+    u = np.concatenate([rng.uniform(-3.0, 323.0, 5000), np.arange(-1.0, 321.0), [318.999, 319.0, 319.5]])
+    v = rng.integers(0, 240, len(u)).astype(np.int32)
+    assert rays_at(u, v, table).tobytes() == _rays_interpolated(u, v, table).tobytes()
+
+
+def test_rays_at_refuses_a_row_outside_the_ray_table():
+    table = ray_table(_camera())
+    with pytest.raises(IndexError):
+        rays_at(np.array([10.0]), np.array([240]), table)

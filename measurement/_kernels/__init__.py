@@ -22,7 +22,7 @@ from .growth import (
     voting_pairs,
 )
 from .offsets import distinct_cells, screened_bins
-from .rays import depth_screen, intersect, neighbour_distances
+from .rays import depth_screen, intersect, neighbour_distances, rays_at
 from .segments import change_cuts, crowded, link_components, smooth_runs
 
 __all__ = [
@@ -42,6 +42,7 @@ __all__ = [
     "near_any_plane",
     "neighbour_distances",
     "neighbour_pairs",
+    "rays_at",
     "screened_bins",
     "segment_steps",
     "smooth_runs",

@@ -80,3 +80,20 @@ def neighbour_distances(rays, planes, lab, left, idx):
             sq = d * d if j == 0 else sq + d * d
         out[q] = np.sqrt(sq)
     return out
+
+
+@compiled
+def rays_at(u, v, flat, w, out):
+    """``triangulation.rays_at`` into ``out`` (M, 3): the rays through columns u (M,) of rows v (M,),
+    interpolated along the row of the ray table ``flat`` (H * W, 2) float32 in float64 as numpy does it."""
+    for i in range(len(u)):
+        u0 = min(max(np.int64(np.floor(u[i])), 0), w - 2)
+        f = u[i] - u0
+        g = 1 - f
+        at = np.int64(v[i]) * w + u0
+        if at < 0 or at + 1 >= len(flat):
+            raise IndexError("rays_at: a centre lies outside the ray table")
+        out[i, 0] = np.float64(flat[at, 0]) * g + np.float64(flat[at + 1, 0]) * f
+        out[i, 1] = np.float64(flat[at, 1]) * g + np.float64(flat[at + 1, 1]) * f
+        out[i, 2] = 1.0
+    return out
