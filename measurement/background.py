@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import _kernels
-from .segments import link_segments, split_at_changes
+from .segments import label_table, link_segments, split_at_changes
 from .triangulation import depth_for_labels, intersect
 
 
@@ -113,7 +113,9 @@ def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, mi
         return {}
     k = hits[one].argmax(axis=1)
     # the claimed segments' median distance from the nearest background plane at their index
-    members = np.concatenate([idx[starts[j]:starts[j + 1]] for j in one])
+    claimed = np.zeros(len(sids), bool)
+    claimed[one] = True
+    members = idx[np.repeat(claimed, np.diff(starts))]  # their centres, segment by segment as in ``one``
     counts = np.diff(starts)[one]
     dist = _plane_distance(intersect(rays.take(members, axis=0), planes.take(np.repeat(k, counts), axis=0)),
                            bg_planes)
@@ -139,8 +141,7 @@ def _plane_distance(points: np.ndarray, bg_planes: np.ndarray) -> np.ndarray:
 def _background_flatness(rays, planes, seg, seg_label: dict[int, int], bg_planes, most: int = 20000) -> float:
     """Median distance (mm) of the labelled background's points (segment -> index ``seg_label``, at most
     ``most`` of them, evenly thinned) from the nearest background plane: the centres' noise in depth."""
-    table = np.full(seg.max() + 1, -1, np.int64)
-    table[np.fromiter(seg_label.keys(), np.int64)] = np.fromiter(seg_label.values(), np.int64)
+    table = label_table(seg, seg_label)
     idx = np.flatnonzero(table[seg] >= 0)
     idx = idx[:: len(idx) // most + 1]
     if len(idx) == 0:
@@ -166,8 +167,7 @@ def background_like(rays, planes, seg, mask, bg_planes, exclude: set, share: flo
 def segments_on_planes(rays, planes, seg, seg_label: dict[int, int], bg_planes, share: float = 0.9) -> set[int]:
     """The segments of ``seg_label`` (segment -> stripe index) whose points, on their stripe's plane, lie
     on the background planes for at least ``share`` of their centres."""
-    table = np.full(seg.max() + 1, -1, np.int64)
-    table[np.fromiter(seg_label.keys(), np.int64)] = np.fromiter(seg_label.values(), np.int64)
+    table = label_table(seg, seg_label)
     idx = np.nonzero(table[seg] >= 0)[0]
     near = near_planes(intersect(rays.take(idx, axis=0), planes.take(table[seg[idx]], axis=0)), bg_planes)
     sids = np.fromiter(seg_label.keys(), np.int64)

@@ -47,6 +47,7 @@ from .offsets import (
 )
 from .segments import (
     denoise,
+    label_table,
     link_segments,
     row_neighbours,
     row_order,
@@ -387,7 +388,7 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
     (``lit_cells``) a segment that would put more than a quarter of its cells on lit background does not
     continue the stripe either: something else lit those projector rays."""
     out: dict[int, int] = {}
-    table = _label_table(seg, seg_label)
+    table = label_table(seg, seg_label)
     good = np.bincount(seg, weights=reliable(c), minlength=seg.max() + 1) >= 0.6 * np.bincount(
         seg, minlength=seg.max() + 1)
     order = np.lexsort((c.v, seg))
@@ -501,7 +502,7 @@ def _placed(trial: dict[int, int], rel: np.ndarray, off: int, n: int) -> dict[in
 
 def _labels_of(seg: np.ndarray, seg_label: dict[int, int], long_seg: np.ndarray) -> np.ndarray:
     """Per-centre labels (M,) from a segment -> label map; -1 for short segments and unlabelled ones."""
-    out = _label_table(seg, seg_label)[seg]
+    out = label_table(seg, seg_label)[seg]
     out[~long_seg] = -1
     return out
 
@@ -514,7 +515,7 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
     ``avoid_planes`` only when they do not. With ``slope`` (depth only) the neighbour's depth is
     extrapolated by its own step from the stripe beyond it, so a steep surface keeps growing.
     ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``, when already known."""
-    table = _label_table(seg, seg_label)
+    table = label_table(seg, seg_label)
     pairs = _open_pairs(_neighbour_pairs(seg, long_seg, left, right) if pairs is None else pairs, table)
     if depth_only and not slope and bg_planes is None and avoid_planes is None:  # all rounds compiled
         segs, labs = _kernels.grow_by_depth(rays, planes, table, pairs.cols, tol_mm, n, np.array(gaps, np.int64),
@@ -637,14 +638,6 @@ def _beside(pairs: _Pairs, flags: np.ndarray) -> np.ndarray:
     return _kernels.flag_beside(pairs.own_seg, pairs.nb_seg, flags)
 
 
-def _label_table(seg: np.ndarray, seg_label: dict[int, int]) -> np.ndarray:
-    """Label (S,) of every segment id up to seg.max(), -1 where ``seg_label`` has none."""
-    table = np.full(seg.max() + 1, -1, np.int64)
-    if seg_label:
-        table[np.fromiter(seg_label.keys(), np.int64)] = np.fromiter(seg_label.values(), np.int64)
-    return table
-
-
 def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, min_share, gaps,
            active: np.ndarray | None = None, slope: bool = False,
            seg_steps: dict[int, np.ndarray] | None = None) -> dict[int, int]:
@@ -730,7 +723,7 @@ def _refine(rays, planes, seg, seg_label, pairs: _Pairs, tol_mm, n, rounds: int 
     """Re-vote each labelled segment by its neighbours (``pairs``: the ``_neighbour_pairs`` of its
     centres); a clear majority for another label (a growth step that took the wrong gap) replaces it.
     Updates ``seg_label`` in place."""
-    table = _label_table(seg, seg_label)
+    table = label_table(seg, seg_label)
     for _ in range(rounds):
         votes = _votes(rays, planes, table, pairs, tol_mm, n, True, True, 0.7, (1, 2, 3))
         changed = {s: k for s, k in votes.items() if seg_label.get(s) != k}

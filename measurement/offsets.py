@@ -322,8 +322,9 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
 
     With ``shallow``, a ramp too shallow to read the usual way (steps under 0.005 of the piece's cells: a
     blob seen from above or a sitting rabbit hides most of its shadow's lit edge) still places the piece
-    when it is steady (``steady_ramp``): then at its minimum, since a residue of half such a step is
-    already the whole next column's conflicts. ``report`` (if given) gets "shallow": whether it was."""
+    when it is steady (``steady_ramp``): then at about its minimum (a tenth of a step of residue
+    tolerated, not half), since a residue of half such a step is already the whole next column's
+    conflicts. ``report`` (if given) gets "shallow": whether it was."""
     if beside_placed:
         sharp = sharp_minimum(conflicts, beyond)
         if sharp is not None:

@@ -112,9 +112,9 @@ def _warnings(meas: dict, labels: Labels) -> list[str]:
                    "sides of it")
     if labels.faint_shadow:
         out.append("the stripe indices of the animal were read from a faint shadow (most of the animal's shadow "
-                   "is hidden from the camera), so they may be off by one stripe, which moves the whole cloud in depth and changes its size: "
-                   "check one measurement against a tape, or move the projector or the animal so that more of "
-                   "its shadow falls on floor the camera sees")
+                   "is hidden from the camera), so they may be off by one stripe, which moves the whole cloud "
+                   "in depth and changes its size: check one measurement against a tape, or move the projector "
+                   "or the animal so that more of its shadow falls on floor the camera sees")
     if meas.get("body_length_mm") is None or meas.get("body_height_mm") is None:
         out.append("no body length or height: too few animal points were reconstructed")
     return out

@@ -96,3 +96,11 @@ def smooth_along_segments(c: Centres, segment: np.ndarray, labels: np.ndarray, h
     order = idx[np.lexsort((c.v[idx], segment[idx]))]
     _kernels.smooth_runs(order, _runs(segment[order]), c.u, half, outlier_px, u, keep)
     return u, keep
+
+
+def label_table(seg: np.ndarray, seg_label: dict[int, int]) -> np.ndarray:
+    """Label (S,) of every segment id up to seg.max(), -1 where ``seg_label`` (segment -> label) has none."""
+    table = np.full(seg.max() + 1, -1, np.int64)
+    if seg_label:
+        table[np.fromiter(seg_label.keys(), np.int64)] = np.fromiter(seg_label.values(), np.int64)
+    return table
