@@ -50,6 +50,19 @@ def test_robust_fit_ignores_a_fifth_of_gross_outliers():
     assert np.degrees(np.arccos(abs(fit_plane_tls(pts)[:3] @ true[:3]))) > 0.1  # plain TLS is pulled
 
 
+def test_robust_fit_on_a_subsample_lands_within_a_hundredth_of_a_millimetre_of_the_full_fit():
+    rng = np.random.default_rng(2)
+    true = _pencil(1)[0]
+    pts = _sample(true, rng, 60000, noise=0.3)
+    pts[:6000] += rng.normal(0, 20, (6000, 3))  # a tenth of the points off the plane (an animal)
+    full, _ = fit_plane_robust(pts, np.random.default_rng(0), exact=False)
+    sub, inl = fit_plane_robust(pts, np.random.default_rng(0), exact=False, refine_points=8000)
+    assert len(inl) < 10000  # the mask is the subsample's
+    centre = pts.mean(axis=0)
+    assert abs(point_plane_distance(centre[None], full)[0] - point_plane_distance(centre[None], sub)[0]) < 0.01
+    assert np.degrees(np.arccos(min(1.0, abs(full[:3] @ sub[:3])))) < 0.005
+
+
 def test_pencil_fit_is_closer_to_truth_than_independent_fits_on_noisy_data():
     rng = np.random.default_rng(2)
     true = _pencil(10)
