@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
+from . import _kernels
 from .board import abc_to_plane, fit_plane_abc
 
 PLANE_METHODS = ("abc", "tls", "robust", "pencil")
@@ -73,9 +74,7 @@ def fit_plane_robust(points: np.ndarray, rng: np.random.Generator | None = None,
     good = norm > 1e-9
     n = n[good] / norm[good, None]
     d = np.einsum("ij,ij->i", n, tri[good, 0])
-    dist = sample @ n.T
-    dist -= d  # in place: the (2000, iterations) temporaries cost more than the arithmetic
-    counts = (np.abs(dist, out=dist) < tol).sum(axis=0)
+    counts = _kernels.inlier_counts(sample, n, d, tol)
     best = np.append(n[np.argmax(counts)], d[np.argmax(counts)]) if len(counts) else fit_plane_tls(pts)
     if refine_points is not None and len(pts) > refine_points:
         pts = pts[::-(-len(pts) // refine_points)]

@@ -9,7 +9,7 @@ none is writable the kernels are compiled in memory on each start."""
 
 from __future__ import annotations
 
-from .background import group_counts, near_any_plane
+from .background import group_counts, inlier_counts, near_any_plane
 from .growth import (
     depth_votes,
     flag_beside,
@@ -35,6 +35,7 @@ __all__ = [
     "flag_touching",
     "gapped_rows",
     "group_counts",
+    "inlier_counts",
     "grow_by_depth",
     "intersect",
     "link_components",

@@ -49,3 +49,19 @@ def group_counts(flags, starts):
             for k in range(n):
                 out[g, k] += flags[i, k]
     return out
+
+
+@compiled
+def inlier_counts(sample, normals, offsets, tol_mm):
+    """Per candidate plane (C,) of ``normals`` (C, 3) and ``offsets`` (C,): how many of the points
+    ``sample`` (K, 3) lie within ``tol_mm`` of it (RANSAC's score, without the (K, C) distance matrix;
+    the dot product summed x, y, z in order, so a point within a rounding of ``tol_mm`` may count
+    differently than through BLAS)."""
+    out = np.zeros(len(normals), np.int64)
+    for j in range(len(normals)):
+        n0, n1, n2, d = normals[j, 0], normals[j, 1], normals[j, 2], offsets[j]
+        count = 0
+        for i in range(len(sample)):
+            count += abs(sample[i, 0] * n0 + sample[i, 1] * n1 + sample[i, 2] * n2 - d) < tol_mm
+        out[j] = count
+    return out
