@@ -1,4 +1,4 @@
-"""The compiled kernels against the NumPy forms they replaced, to the bit."""
+"""The compiled kernels against the NumPy forms they replaced, to the bit (or, where a kernel says so, to a rounding)."""
 
 import cv2
 import numpy as np
@@ -132,3 +132,15 @@ def test_crowded_counts_as_the_full_frame_box_filter_does():
             row = np.minimum(rng.integers(0, h, m), rng.integers(0, h, m))
             col = rng.integers(0, w, m)
             assert np.array_equal(_kernels.crowded(row, col, h, size), _crowded_reference(row, col, h, w, size))
+
+
+def test_inlier_counts_score_planes_as_the_distance_matrix_does():
+    rng = np.random.default_rng(5)
+    sample = rng.normal(0, 100, (2000, 3)) + [0, 0, 1200]
+    n = rng.normal(size=(300, 3))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    d = n @ sample[rng.integers(0, 2000, 300)].T[:, 0]
+    counts = _kernels.inlier_counts(sample, n, d, 4.0)
+    reference = (np.abs(sample @ n.T - d) < 4.0).sum(axis=0)
+    assert counts.sum() > 300  # each plane passes through a point of the sample at least
+    assert np.abs(counts - reference).max() <= 1  # a point within a rounding of 4 mm may count either way
