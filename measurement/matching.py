@@ -324,6 +324,7 @@ def _pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pair
     remaining = long_seg & ~labelled[seg]
     sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)  # centres left per segment
     pool = pairs.of(remaining)  # of the centres left
+    left_idx = np.flatnonzero(remaining)  # the centres left, ascending: each piece's are taken from these
     found = []
     while sizes.sum() >= 50:
         seed = int(np.argmax(sizes))
@@ -333,10 +334,11 @@ def _pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pair
         _grow_all(c, rays, planes, seg, trial, remaining, left, right, tol, n, None, depth_only=True, pairs=pool)
         in_trial = np.zeros(seg.max() + 1, bool)
         in_trial[np.fromiter(trial, np.int64)] = True
-        _refine(rays, planes, seg, trial, pool.take(in_trial[pool.own_seg]), tol, n)  # members stay
-        in_cluster = in_trial[seg] & remaining
-        remaining &= ~in_cluster
-        idx = np.nonzero(in_cluster)[0]
+        _refine(rays, planes, seg, trial, pool, tol, n)  # members stay
+        in_cluster = in_trial[seg.take(left_idx)]
+        idx = left_idx[in_cluster]
+        left_idx = left_idx[~in_cluster]
+        remaining[idx] = False
         sizes -= np.bincount(seg[idx], minlength=len(sizes))
         pool = pool.take(remaining[pool.idx])
         found.append((idx, trial))
@@ -516,12 +518,14 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
     extrapolated by its own step from the stripe beyond it, so a steep surface keeps growing.
     ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``, when already known."""
     table = label_table(seg, seg_label)
-    pairs = _open_pairs(_neighbour_pairs(seg, long_seg, left, right) if pairs is None else pairs, table)
+    pairs = _neighbour_pairs(seg, long_seg, left, right) if pairs is None else pairs
     if depth_only and not slope and bg_planes is None and avoid_planes is None:  # all rounds compiled
+        # (the kernel passes over pairs whose own segment is labelled: no copy of the open ones)
         segs, labs = _kernels.grow_by_depth(rays, planes, table, pairs.cols, tol_mm, n, np.array(gaps, np.int64),
                                             GAP_PENALTY_MM, min_share, 40)
         seg_label.update(zip(segs.tolist(), labs.tolist(), strict=True))
         return
+    pairs = _open_pairs(pairs, table)
     newly = table >= 0
     steps: dict[int, np.ndarray] | None = None
     since = None
@@ -720,17 +724,14 @@ def _majority(voter: np.ndarray, vote: np.ndarray, n: int, min_share: float) -> 
 
 
 def _refine(rays, planes, seg, seg_label, pairs: _Pairs, tol_mm, n, rounds: int = 3) -> None:
-    """Re-vote each labelled segment by its neighbours (``pairs``: the ``_neighbour_pairs`` of its
-    centres); a clear majority for another label (a growth step that took the wrong gap) replaces it.
-    Updates ``seg_label`` in place."""
+    """Re-vote each labelled segment by its neighbours (``pairs``: neighbour pairs of its centres, or of a
+    superset: pairs of unlabelled segments are passed over); a clear majority for another label (a growth
+    step that took the wrong gap) replaces it. Updates ``seg_label`` in place."""
     table = label_table(seg, seg_label)
-    for _ in range(rounds):
-        votes = _votes(rays, planes, table, pairs, tol_mm, n, True, True, 0.7, (1, 2, 3))
-        changed = {s: k for s, k in votes.items() if seg_label.get(s) != k}
-        if not changed:
-            break
-        seg_label.update(changed)
-        table[np.fromiter(changed.keys(), np.int64)] = np.fromiter(changed.values(), np.int64)
+    changed = _kernels.refine_by_depth(rays, planes, table, pairs.cols, tol_mm, n, np.array((1, 2, 3), np.int64),
+                                       GAP_PENALTY_MM, 0.7, rounds)
+    for s in changed.tolist():
+        seg_label[s] = int(table[s])
 
 
 def _enforce_row_order(c: Centres, labels: np.ndarray, order: np.ndarray) -> np.ndarray:

@@ -18,6 +18,7 @@ from .growth import (
     grow_by_depth,
     majority,
     neighbour_pairs,
+    refine_by_depth,
     segment_steps,
     voting_pairs,
 )
@@ -44,6 +45,7 @@ __all__ = [
     "neighbour_distances",
     "neighbour_pairs",
     "rays_at",
+    "refine_by_depth",
     "screened_bins",
     "segment_steps",
     "smooth_runs",

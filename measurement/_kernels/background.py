@@ -11,8 +11,10 @@ from .jit import compiled
 def near_any_plane(rays, planes, bg_planes, tol_mm, near):
     """Into ``near`` (m, N) bool: whether ray i's point on light plane k (N, 4) lies within ``tol_mm``
     of a background plane (P, 4), screened as |z (ray . n) - d|; returns the positions i N + k (U,),
-    sorted, where rounding could decide (within 1e-6 mm of ``tol_mm``, |z| >= 1e5 or not finite),
-    which the exact formula (``background._near_exact``) must settle."""
+    sorted, where rounding could decide (within 1e-6 mm of ``tol_mm``, |z| >= 1e8 or not finite),
+    which the exact formula (``background._near_exact``) must settle. Up to |z| = 1e8 mm both formulas
+    round by under 1e-7 mm (a few ulp of 1e8); a ray nearly parallel to a light plane (|z| of 1e5-1e8, a
+    third of the screened pairs at a fan's edge) needs no exact form."""
     m, n = near.shape
     unsure = np.empty(m * n, np.int64)
     u = 0
@@ -32,7 +34,7 @@ def near_any_plane(rays, planes, bg_planes, tol_mm, near):
                 d[k] = g if g < d[k] else d[k]  # NaN skipped, as np.fmin skips it
         for k in range(n):
             near[i, k] = d[k] < tol_mm
-            if not (abs(d[k] - tol_mm) > 1e-6 and abs(z[k]) < 1e5):
+            if not (abs(d[k] - tol_mm) > 1e-6 and abs(z[k]) < 1e8):
                 unsure[u] = i * n + k
                 u += 1
     return unsure[:u]

@@ -222,3 +222,35 @@ def gapped_rows(u, order, m, n, window, slack, labels):
             for j in range(m - 1):
                 lab += np.int64(k[j])
                 labels[at[j + 1]] = lab
+
+
+@compiled
+def refine_by_depth(rays, planes, table, cols, tol_mm, n, gaps, penalty_mm, min_share, rounds):
+    """``matching._refine`` as one loop: up to ``rounds`` rounds in which every labelled segment of
+    ``table`` (S,) is re-voted by depth continuity from its labelled row neighbours (the pairs ``cols``,
+    ``matching._Pairs`` rows; pairs of unlabelled segments are passed over) and takes the majority's
+    label where it differs; stops when none does. Updates ``table`` in place and returns the segments
+    (G,) that changed, in the order of their last change."""
+    everyone = np.ones(len(table), np.bool_)
+    no_step = np.zeros(0)
+    changed = np.zeros(len(table), np.bool_)
+    order = np.empty(len(table), np.int64)
+    m = 0
+    for _ in range(rounds):
+        at = voting_pairs(cols[3], cols[4], table, everyone, True)
+        if len(at) == 0:
+            break
+        best = depth_votes(rays, planes, table, cols, at, gaps, tol_mm, n, penalty_mm, no_step)
+        segs, labs = majority(cols[3][at], best, n, min_share)
+        any_change = False
+        for g in range(len(segs)):
+            if table[segs[g]] != labs[g]:
+                table[segs[g]] = labs[g]
+                if not changed[segs[g]]:
+                    changed[segs[g]] = True
+                    order[m] = segs[g]
+                    m += 1
+                any_change = True
+        if not any_change:
+            break
+    return order[:m]
