@@ -51,6 +51,7 @@ from .segments import (
     link_segments,
     row_neighbours,
     row_order,
+    segment_rows,
     smooth_along_segments,
     split_at_changes,
 )
@@ -393,7 +394,7 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
     table = label_table(seg, seg_label)
     good = np.bincount(seg, weights=reliable(c), minlength=seg.max() + 1) >= 0.6 * np.bincount(
         seg, minlength=seg.max() + 1)
-    order = np.lexsort((c.v, seg))
+    order = segment_rows(seg, c.v)
     s_sorted = seg[order]
     runs = np.r_[0, np.flatnonzero(s_sorted[1:] != s_sorted[:-1]) + 1, len(seg)]  # a segment each, top down
     sids = s_sorted[runs[:-1]]

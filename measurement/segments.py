@@ -56,11 +56,19 @@ def split_at_changes(c: Centres, seg: np.ndarray, window: int = 8, ratio: float 
     free, so a stripe that crossed the animal's outline in the image is separated before any index is
     given. Returns new segment ids (M,)."""
     out = seg.copy()
-    order = np.lexsort((c.v, seg))
+    order = segment_rows(seg, c.v)
     logc = np.log(np.maximum(c.contrast.astype(np.float64), 1.0))
     _kernels.change_cuts(order, _runs(seg[order]), logc, c.u, c.v.astype(np.float64), window,
                          float(np.log(ratio)), slope_change, out, int(seg.max()) + 1)
     return out
+
+
+def segment_rows(seg: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``np.lexsort((v, seg))``: the centres (M,) by segment id (>= 0), then row, ties in index order; by
+    counting sorts when the rows are integers (a tenth of the time on 10^5 centres)."""
+    if len(seg) and np.issubdtype(v.dtype, np.integer) and seg.min() >= 0:
+        return _kernels.segment_row_order(seg, v)
+    return np.lexsort((v, seg))
 
 
 def _runs(keys: np.ndarray) -> np.ndarray:
@@ -93,7 +101,7 @@ def smooth_along_segments(c: Centres, segment: np.ndarray, labels: np.ndarray, h
     idx = np.nonzero(keep)[0]
     if len(idx) == 0:
         return u, keep
-    order = idx[np.lexsort((c.v[idx], segment[idx]))]
+    order = idx[segment_rows(segment[idx], c.v[idx])]
     _kernels.smooth_runs(order, _runs(segment[order]), c.u, half, outlier_px, u, keep)
     return u, keep
 

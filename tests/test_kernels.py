@@ -144,3 +144,11 @@ def test_inlier_counts_score_planes_as_the_distance_matrix_does():
     reference = (np.abs(sample @ n.T - d) < 4.0).sum(axis=0)
     assert counts.sum() > 300  # each plane passes through a point of the sample at least
     assert np.abs(counts - reference).max() <= 1  # a point within a rounding of 4 mm may count either way
+
+
+def test_segment_row_order_sorts_as_lexsort_does():
+    rng = np.random.default_rng(6)
+    v = rng.integers(3, 900, 20000).astype(np.int32)
+    seg = rng.integers(0, 400, 20000)
+    assert np.array_equal(_kernels.segment_row_order(seg, v), np.lexsort((v, seg)))
+    assert len(_kernels.segment_row_order(seg[:0], v[:0])) == 0

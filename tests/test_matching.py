@@ -322,3 +322,28 @@ def test_near_planes_answers_as_the_nearest_plane_distance_does():
         d = np.abs(points @ bg[:, :3].T - bg[:, 3])
         expected = np.nan_to_num(d, nan=np.inf).min(axis=1) < 8.0
         assert np.array_equal(near_planes(points, bg, 8.0), expected)
+
+
+def test_the_compiled_re_vote_corrects_a_slipped_segment_as_the_python_rounds_do():
+    from measurement.matching import _neighbour_pairs, _refine, _votes
+    from measurement.segments import label_table
+
+    planes, rays, seg, left, right, lab = _steep_ramp(0.0, range(10, 17), np.arange(0, 60))
+    pairs = _neighbour_pairs(seg, np.ones(len(seg), bool), left, right)
+    slipped = {s: 10 + s for s in range(7)} | {3: 14}  # segment 3 took a wrong gap: one stripe high
+    tol = 20.0
+
+    reference = dict(slipped)
+    table = label_table(seg, reference)
+    for _ in range(3):  # matching._refine's rounds, one _votes call each
+        votes = _votes(rays, planes, table, pairs, tol, 40, True, True, 0.7, (1, 2, 3))
+        changed = {s: k for s, k in votes.items() if reference.get(s) != k}
+        if not changed:
+            break
+        reference.update(changed)
+        table[list(changed)] = list(changed.values())
+
+    got = dict(slipped)
+    _refine(rays, planes, seg, got, pairs, tol, 40)
+    assert got == reference
+    assert got[3] == 13

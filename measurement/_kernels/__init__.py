@@ -24,7 +24,7 @@ from .growth import (
 )
 from .offsets import distinct_cells, screened_bins
 from .rays import depth_screen, intersect, neighbour_distances, rays_at
-from .segments import change_cuts, crowded, link_components, smooth_runs
+from .segments import change_cuts, crowded, link_components, segment_row_order, smooth_runs
 
 __all__ = [
     "change_cuts",
@@ -47,6 +47,7 @@ __all__ = [
     "rays_at",
     "refine_by_depth",
     "screened_bins",
+    "segment_row_order",
     "segment_steps",
     "smooth_runs",
     "voting_pairs",

@@ -261,3 +261,35 @@ def crowded(row, col, h, size):
                     p1 += 1
                 n[i] += p1 - p0
     return 2 * n >= size
+
+
+@compiled
+def segment_row_order(seg, v):
+    """``np.lexsort((v, seg))`` for non-negative segment ids ``seg`` (M,) and integer rows ``v`` (M,): the
+    centres by segment, then row, ties in index order. Two stable counting sorts (by row, then by
+    segment) instead of a comparison sort."""
+    m = len(seg)
+    out = np.empty(m, np.int64)
+    if m == 0:
+        return out
+    v_lo, v_hi = v.min(), v.max()
+    count = np.zeros(v_hi - v_lo + 2, np.int64)
+    for i in range(m):
+        count[v[i] - v_lo + 1] += 1
+    for j in range(1, len(count)):
+        count[j] += count[j - 1]
+    by_row = np.empty(m, np.int64)
+    for i in range(m):
+        r = v[i] - v_lo
+        by_row[count[r]] = i
+        count[r] += 1
+    starts = np.zeros(seg.max() + 2, np.int64)
+    for i in range(m):
+        starts[seg[i] + 1] += 1
+    for j in range(1, len(starts)):
+        starts[j] += starts[j - 1]
+    for q in range(m):
+        i = by_row[q]
+        out[starts[seg[i]]] = i
+        starts[seg[i]] += 1
+    return out
