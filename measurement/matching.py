@@ -510,6 +510,9 @@ def _labels_of(seg: np.ndarray, seg_label: dict[int, int], long_seg: np.ndarray)
     return out
 
 
+_COMPILED_SLOPE = True  # slope growth in one compiled loop (False: the rounds below, the reference)
+
+
 def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, bg_planes=None,
               depth_only=False, avoid_planes=None, gaps=(1, 2, 3), min_share=0.6, slope=False,
               pairs: _Pairs | None = None) -> None:
@@ -524,6 +527,11 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
         # (the kernel passes over pairs whose own segment is labelled: no copy of the open ones)
         segs, labs = _kernels.grow_by_depth(rays, planes, table, pairs.cols, tol_mm, n, np.array(gaps, np.int64),
                                             GAP_PENALTY_MM, min_share, 40)
+        seg_label.update(zip(segs.tolist(), labs.tolist(), strict=True))
+        return
+    if depth_only and slope and bg_planes is None and avoid_planes is None and _COMPILED_SLOPE:
+        segs, labs = _kernels.grow_by_slope(rays, planes, table, pairs.cols, seg, left, right, tol_mm, n,
+                                            np.array(gaps, np.int64), GAP_PENALTY_MM, min_share, 40, 3)
         seg_label.update(zip(segs.tolist(), labs.tolist(), strict=True))
         return
     pairs = _open_pairs(pairs, table)

@@ -347,3 +347,28 @@ def test_the_compiled_re_vote_corrects_a_slipped_segment_as_the_python_rounds_do
     _refine(rays, planes, seg, got, pairs, tol, 40)
     assert got == reference
     assert got[3] == 13
+
+
+@pytest.mark.parametrize("slope_mm, tail", [(-1.2, False), (-1.2, True), (-0.4, False), (0.3, True)])
+def test_compiled_slope_growth_joins_as_the_python_rounds_do(monkeypatch, slope_mm, tail):
+    """The compiled slope growth against the Python rounds it replaced: the same segments, labels and
+    order of joining, on steep and shallow ramps, with stripes ending lower toward a tip or not."""
+    from measurement import matching
+    from measurement.triangulation import depth_on
+
+    def rows(k: int) -> np.ndarray:
+        return np.arange(8 * (15 - k) - 40, 8 * (15 - k) - 24, 2) if tail else np.arange(-40, 40, 2)
+
+    planes, rays, seg, left, right, lab = _steep_ramp(slope_mm, range(8, 16), rows)
+    step = np.abs(np.diff([depth_on(rays[lab == k][:1], planes[k:k + 1])[0] for k in range(8, 16)]))
+    tol = 0.8 * float(step.min())
+    long_seg = np.ones(len(seg), bool)
+    grown = []
+    for compiled in (False, True):
+        monkeypatch.setattr(matching, "_COMPILED_SLOPE", compiled)
+        seg_label = {7: 15, 6: 14}
+        matching._grow_all(None, rays, planes, seg, seg_label, long_seg, left, right, tol, 40, None,
+                           depth_only=True, gaps=(1,), min_share=0.8, slope=True)
+        grown.append(list(seg_label.items()))
+    assert grown[0] == grown[1]
+    assert len(grown[0]) > 2  # something grew

@@ -254,3 +254,97 @@ def refine_by_depth(rays, planes, table, cols, tol_mm, n, gaps, penalty_mm, min_
         if not any_change:
             break
     return order[:m]
+
+
+@compiled
+def _slope_step(rays, planes, table, cols, p, zn, tol_mm):
+    """For pair ``p`` (``matching._Pairs`` rows ``cols``): whether its neighbour's outer neighbour is on
+    the next stripe (``has``), whether the step measured there is usable (evenly spaced, within 2
+    ``tol_mm``), and that step, mm (``matching._slope_steps``' first part)."""
+    idx, nbr, sign, far, far_seg = cols[0, p], cols[1, p], cols[2, p], cols[5, p], cols[6, p]
+    kn = table[cols[4, p]]
+    kf = table[far_seg] if far_seg >= 0 else -1
+    if not (kf == kn - sign and kf >= 0):
+        return False, False, 0.0
+    zf = _depth(rays, far, planes, kf)
+    near_dx = abs(rays[idx, 0] - rays[nbr, 0])
+    far_dx = abs(rays[nbr, 0] - rays[far, 0])
+    even = near_dx < 1.3 * far_dx and far_dx < 1.3 * near_dx
+    valid = abs(zn - zf) < 2 * tol_mm and even
+    return True, valid, (zn - zf) if valid else 0.0
+
+
+@compiled
+def grow_by_slope(rays, planes, table, cols, seg, left, right, tol_mm, n, gaps, penalty_mm, min_share, rounds,
+                  min_rows):
+    """``matching._grow_all`` with ``slope`` (depth only, no plane test) as one loop: rounds of
+    ``segment_steps`` (both sides, only the segments touching the last round's joins measured again),
+    the voting pairs' extrapolated steps (``matching._slope_steps``), ``depth_votes`` and ``majority``
+    among the segments beside one labelled the round before, until none joins. Updates ``table`` (S,)
+    and returns the segments (G,) and labels (G,) in the order they joined."""
+    n_seg = len(table)
+    newly = table >= 0
+    out_seg = np.empty(n_seg, np.int64)
+    out_lab = np.empty(n_seg, np.int64)
+    m = 0
+    steps_l = np.empty(0)
+    steps_r = np.empty(0)
+    touched = np.ones(n_seg, np.bool_)
+    first = True
+    cnt = np.zeros(2 * n_seg, np.int64)
+    tot = np.zeros(2 * n_seg)
+    for _ in range(rounds):
+        active = flag_beside(cols[3], cols[4], newly)
+        measured = table >= 0
+        if not first:
+            measured &= touched
+        new_l = segment_steps(seg, rays, planes, table, left, 1, measured, tol_mm, min_rows)
+        new_r = segment_steps(seg, rays, planes, table, right, -1, measured, tol_mm, min_rows)
+        if first:
+            steps_l, steps_r = new_l, new_r
+        else:
+            for s in range(n_seg):
+                if touched[s]:
+                    steps_l[s], steps_r[s] = new_l[s], new_r[s]
+        first = False
+        at = voting_pairs(cols[3], cols[4], table, active, False)
+        if len(at) == 0:
+            break
+        k_at = len(at)
+        step = np.zeros(k_at)
+        has = np.zeros(k_at, np.bool_)
+        cnt[:] = 0
+        tot[:] = 0.0
+        for q in range(k_at):
+            p = at[q]
+            zn = _depth(rays, cols[1, p], planes, table[cols[4, p]])
+            h, valid, st = _slope_step(rays, planes, table, cols, p, zn, tol_mm)
+            has[q] = h
+            step[q] = st
+            if h and valid:
+                key = cols[4, p] if cols[2, p] > 0 else cols[4, p] + n_seg
+                cnt[key] += 1
+                tot[key] += st
+        for q in range(k_at):
+            p = at[q]
+            if has[q]:
+                continue
+            key = cols[4, p] if cols[2, p] > 0 else cols[4, p] + n_seg
+            if cnt[key] >= 3:
+                step[q] = tot[key] / max(cnt[key], 1)
+            if step[q] == 0.0:
+                own = steps_l[cols[4, p]] if cols[2, p] > 0 else steps_r[cols[4, p]]
+                if np.isfinite(own):
+                    step[q] = own
+        best = depth_votes(rays, planes, table, cols, at, gaps, tol_mm, n, penalty_mm, step)
+        segs, labs = majority(cols[3][at], best, n, min_share)
+        if len(segs) == 0:
+            break
+        newly[:] = False
+        for g in range(len(segs)):
+            table[segs[g]] = labs[g]
+            newly[segs[g]] = True
+            out_seg[m], out_lab[m] = segs[g], labs[g]
+            m += 1
+        touched = flag_touching(seg, left, right, newly)
+    return out_seg[:m], out_lab[:m]
