@@ -275,46 +275,74 @@ def _slope_step(rays, planes, table, cols, p, zn, tol_mm):
 
 
 @compiled
+def _members(seg, n_seg):
+    """The centres of each segment, ascending: group starts (S + 1,) and centres (M,) (a counting sort)."""
+    starts = np.zeros(n_seg + 1, np.int64)
+    for i in range(len(seg)):
+        starts[seg[i] + 1] += 1
+    for s in range(n_seg):
+        starts[s + 1] += starts[s]
+    fill = starts[:-1].copy()
+    members = np.empty(len(seg), np.int64)
+    for i in range(len(seg)):
+        members[fill[seg[i]]] = i
+        fill[seg[i]] += 1
+    return starts, members
+
+
+@compiled
+def _steps_of(s, starts, members, seg, rays, planes, table, nb, sign, tol_mm, min_rows):
+    """``segment_steps``' value for the one segment ``s``, from its own centres (in index order)."""
+    cnt = 0
+    tot = 0.0
+    k = table[s]
+    for j in range(starts[s], starts[s + 1]):
+        i = members[j]
+        f = nb[i]
+        if f < 0:
+            continue
+        kf = table[seg[f]]
+        if kf != k - sign or kf < 0:
+            continue
+        step = _depth(rays, i, planes, k) - _depth(rays, f, planes, kf)
+        if abs(step) < 2 * tol_mm:
+            cnt += 1
+            tot += step
+    return tot / max(cnt, 1) if cnt >= min_rows else np.nan
+
+
+@compiled
 def grow_by_slope(rays, planes, table, cols, seg, left, right, tol_mm, n, gaps, penalty_mm, min_share, rounds,
                   min_rows):
     """``matching._grow_all`` with ``slope`` (depth only, no plane test) as one loop: rounds of
-    ``segment_steps`` (both sides, only the segments touching the last round's joins measured again),
-    the voting pairs' extrapolated steps (``matching._slope_steps``), ``depth_votes`` and ``majority``
-    among the segments beside one labelled the round before, until none joins. Updates ``table`` (S,)
-    and returns the segments (G,) and labels (G,) in the order they joined."""
+    ``segment_steps`` (both sides; after the first round only for the segments touching the last round's
+    joins, from their own centres), the voting pairs' extrapolated steps (``matching._slope_steps``),
+    ``depth_votes`` and ``majority`` among the segments beside one labelled the round before, until none
+    joins. Updates ``table`` (S,) and returns the segments (G,) and labels (G,) in the order they joined."""
     n_seg = len(table)
     newly = table >= 0
     out_seg = np.empty(n_seg, np.int64)
     out_lab = np.empty(n_seg, np.int64)
     m = 0
-    steps_l = np.empty(0)
-    steps_r = np.empty(0)
-    touched = np.ones(n_seg, np.bool_)
-    first = True
+    starts, members = _members(seg, n_seg)
+    steps_l = segment_steps(seg, rays, planes, table, left, 1, newly, tol_mm, min_rows)
+    steps_r = segment_steps(seg, rays, planes, table, right, -1, newly, tol_mm, min_rows)
     cnt = np.zeros(2 * n_seg, np.int64)
     tot = np.zeros(2 * n_seg)
+    touched = np.zeros(n_seg, np.bool_)
     for _ in range(rounds):
         active = flag_beside(cols[3], cols[4], newly)
-        measured = table >= 0
-        if not first:
-            measured &= touched
-        new_l = segment_steps(seg, rays, planes, table, left, 1, measured, tol_mm, min_rows)
-        new_r = segment_steps(seg, rays, planes, table, right, -1, measured, tol_mm, min_rows)
-        if first:
-            steps_l, steps_r = new_l, new_r
-        else:
-            for s in range(n_seg):
-                if touched[s]:
-                    steps_l[s], steps_r[s] = new_l[s], new_r[s]
-        first = False
         at = voting_pairs(cols[3], cols[4], table, active, False)
         if len(at) == 0:
             break
         k_at = len(at)
         step = np.zeros(k_at)
         has = np.zeros(k_at, np.bool_)
-        cnt[:] = 0
-        tot[:] = 0.0
+        for q in range(k_at):
+            p = at[q]
+            key = cols[4, p] if cols[2, p] > 0 else cols[4, p] + n_seg
+            cnt[key] = 0
+            tot[key] = 0.0
         for q in range(k_at):
             p = at[q]
             zn = _depth(rays, cols[1, p], planes, table[cols[4, p]])
@@ -346,5 +374,24 @@ def grow_by_slope(rays, planes, table, cols, seg, left, right, tol_mm, n, gaps, 
             newly[segs[g]] = True
             out_seg[m], out_lab[m] = segs[g], labs[g]
             m += 1
-        touched = flag_touching(seg, left, right, newly)
+        # the steps of the segments touching a new one (``flag_touching``), measured again
+        touched[:] = False
+        for g in range(len(segs)):
+            sg = segs[g]
+            touched[sg] = True
+            for j in range(starts[sg], starts[sg + 1]):
+                i = members[j]
+                if left[i] >= 0:
+                    touched[seg[left[i]]] = True
+                if right[i] >= 0:
+                    touched[seg[right[i]]] = True
+        for sg in range(n_seg):
+            if touched[sg]:
+                if table[sg] >= 0:
+                    steps_l[sg] = _steps_of(sg, starts, members, seg, rays, planes, table, left, 1, tol_mm, min_rows)
+                    steps_r[sg] = _steps_of(sg, starts, members, seg, rays, planes, table, right, -1, tol_mm,
+                                            min_rows)
+                else:
+                    steps_l[sg] = np.nan
+                    steps_r[sg] = np.nan
     return out_seg[:m], out_lab[:m]
