@@ -28,8 +28,8 @@ def background_planes(rays: np.ndarray, planes: np.ndarray, labels: np.ndarray, 
         cand = np.nonzero(rest)[0]
         if len(cand) < 200:
             break
-        plane, _ = fit_plane_robust(pts[cand], rng, iterations=300, inlier_mm=tol_mm / 2, exact=False,
-                                    refine_points=16384)
+        sub = pts if len(cand) == len(pts) else pts.take(cand, axis=0)
+        plane, _ = fit_plane_robust(sub, rng, iterations=300, inlier_mm=tol_mm / 2, exact=False, refine_points=16384)
         near = np.abs(pts @ plane[:3] - plane[3]) < tol_mm
         if near[rest].sum() < (next_share if found else first_share) * len(idx):
             break

@@ -152,3 +152,21 @@ def test_segment_row_order_sorts_as_lexsort_does():
     seg = rng.integers(0, 400, 20000)
     assert np.array_equal(_kernels.segment_row_order(seg, v), np.lexsort((v, seg)))
     assert len(_kernels.segment_row_order(seg[:0], v[:0])) == 0
+
+
+def test_voters_from_grouped_pairs_are_the_voting_pairs_of_a_full_pass():
+    from measurement._kernels.growth import _members, _voters
+
+    rng = np.random.default_rng(7)
+    n_seg, n_pairs = 300, 5000
+    cols = np.zeros((7, n_pairs), np.int64)
+    cols[3] = rng.integers(0, n_seg, n_pairs)
+    cols[4] = rng.integers(0, n_seg, n_pairs)
+    table = np.where(rng.random(n_seg) < 0.4, rng.integers(0, 40, n_seg), -1)
+    newly = np.flatnonzero((table >= 0) & (rng.random(n_seg) < 0.3))
+    flags = np.zeros(n_seg, bool)
+    flags[newly] = True
+    full = _kernels.voting_pairs(cols[3], cols[4], table, _kernels.flag_beside(cols[3], cols[4], flags), False)
+    got = _voters(cols, table, newly, _members(cols[4], n_seg), _members(cols[3], n_seg))
+    assert len(full) > 50
+    assert np.array_equal(got, full)

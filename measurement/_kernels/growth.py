@@ -82,28 +82,29 @@ def grow_by_depth(rays, planes, table, cols, tol_mm, n, gaps, penalty_mm, min_sh
     """``matching._grow_all`` by depth continuity alone (no slope, no plane test): rounds of
     ``depth_votes`` and ``majority`` by the pairs ``cols`` (``matching._Pairs`` rows) of the segments
     beside one labelled the round before, until none joins; updates ``table`` (S,) and returns the
-    segments (G,) and labels (G,) in the order they joined."""
-    newly = table >= 0
+    segments (G,) and labels (G,) in the order they joined. The voting pairs of a round are found
+    from the segments that joined in the last (``_voters``), not by a pass over all pairs."""
     out_seg = np.empty(len(table), np.int64)
     out_lab = np.empty(len(table), np.int64)
     m = 0
     no_step = np.zeros(0)
+    by_nb = _members(cols[4], len(table))
+    by_own = _members(cols[3], len(table))
+    newly = np.flatnonzero(table >= 0)
     for _ in range(rounds):
         # only segments beside a newly labelled one can vote differently from the round before
-        active = flag_beside(cols[3], cols[4], newly)
-        at = voting_pairs(cols[3], cols[4], table, active, False)
+        at = _voters(cols, table, newly, by_nb, by_own)
         if len(at) == 0:
             break
         best = depth_votes(rays, planes, table, cols, at, gaps, tol_mm, n, penalty_mm, no_step)
         segs, labs = majority(cols[3][at], best, n, min_share)
         if len(segs) == 0:
             break
-        newly[:] = False
         for g in range(len(segs)):
             table[segs[g]] = labs[g]
-            newly[segs[g]] = True
             out_seg[m], out_lab[m] = segs[g], labs[g]
             m += 1
+        newly = segs
     return out_seg[:m], out_lab[:m]
 
 
@@ -320,19 +321,21 @@ def grow_by_slope(rays, planes, table, cols, seg, left, right, tol_mm, n, gaps, 
     ``depth_votes`` and ``majority`` among the segments beside one labelled the round before, until none
     joins. Updates ``table`` (S,) and returns the segments (G,) and labels (G,) in the order they joined."""
     n_seg = len(table)
-    newly = table >= 0
+    labelled = table >= 0
+    by_nb = _members(cols[4], n_seg)
+    by_own = _members(cols[3], n_seg)
+    joined = np.flatnonzero(labelled)
     out_seg = np.empty(n_seg, np.int64)
     out_lab = np.empty(n_seg, np.int64)
     m = 0
     starts, members = _members(seg, n_seg)
-    steps_l = segment_steps(seg, rays, planes, table, left, 1, newly, tol_mm, min_rows)
-    steps_r = segment_steps(seg, rays, planes, table, right, -1, newly, tol_mm, min_rows)
+    steps_l = segment_steps(seg, rays, planes, table, left, 1, labelled, tol_mm, min_rows)
+    steps_r = segment_steps(seg, rays, planes, table, right, -1, labelled, tol_mm, min_rows)
     cnt = np.zeros(2 * n_seg, np.int64)
     tot = np.zeros(2 * n_seg)
     touched = np.zeros(n_seg, np.bool_)
     for _ in range(rounds):
-        active = flag_beside(cols[3], cols[4], newly)
-        at = voting_pairs(cols[3], cols[4], table, active, False)
+        at = _voters(cols, table, joined, by_nb, by_own)
         if len(at) == 0:
             break
         k_at = len(at)
@@ -368,12 +371,11 @@ def grow_by_slope(rays, planes, table, cols, seg, left, right, tol_mm, n, gaps, 
         segs, labs = majority(cols[3][at], best, n, min_share)
         if len(segs) == 0:
             break
-        newly[:] = False
         for g in range(len(segs)):
             table[segs[g]] = labs[g]
-            newly[segs[g]] = True
             out_seg[m], out_lab[m] = segs[g], labs[g]
             m += 1
+        joined = segs
         # the steps of the segments touching a new one (``flag_touching``), measured again
         touched[:] = False
         for g in range(len(segs)):
@@ -395,3 +397,40 @@ def grow_by_slope(rays, planes, table, cols, seg, left, right, tol_mm, n, gaps, 
                     steps_l[sg] = np.nan
                     steps_r[sg] = np.nan
     return out_seg[:m], out_lab[:m]
+
+
+@compiled
+def _voters(cols, table, newly, by_nb, by_own):
+    """``voting_pairs(cols[3], cols[4], table, flag_beside(cols[3], cols[4], flags of newly), False)`` from
+    the pairs grouped by neighbour segment ``by_nb`` and by own segment ``by_own`` (``_members`` of
+    cols[4] and cols[3]): the positions (K,), ascending, of the pairs whose own segment is unlabelled and
+    beside a segment in ``newly`` (G,), and whose neighbour is labelled."""
+    nb_starts, nb_pairs = by_nb
+    own_starts, own_pairs = by_own
+    seen = np.zeros(len(table), np.bool_)
+    active = np.empty(len(table), np.int64)
+    n_active = 0
+    for g in range(len(newly)):
+        s = newly[g]
+        for j in range(nb_starts[s], nb_starts[s + 1]):
+            a = cols[3, nb_pairs[j]]
+            if not seen[a] and table[a] < 0:
+                seen[a] = True
+                active[n_active] = a
+                n_active += 1
+    count = 0
+    for q in range(n_active):
+        a = active[q]
+        count += own_starts[a + 1] - own_starts[a]
+    out = np.empty(count, np.int64)
+    k = 0
+    for q in range(n_active):
+        a = active[q]
+        for j in range(own_starts[a], own_starts[a + 1]):
+            p = own_pairs[j]
+            if table[cols[4, p]] >= 0:
+                out[k] = p
+                k += 1
+    out = out[:k]
+    out.sort()
+    return out
