@@ -332,10 +332,11 @@ def _pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pair
         if sizes[seed] < 30:
             break
         trial = {seed: mid}
-        _grow_all(c, rays, planes, seg, trial, remaining, left, right, tol, n, None, depth_only=True, pairs=pool)
-        in_trial = np.zeros(seg.max() + 1, bool)
+        _grow_all(c, rays, planes, seg, trial, remaining, left, right, tol, n, None, depth_only=True, pairs=pool,
+                  n_seg=len(sizes))
+        in_trial = np.zeros(len(sizes), bool)
         in_trial[np.fromiter(trial, np.int64)] = True
-        _refine(rays, planes, seg, trial, pool, tol, n)  # members stay
+        _refine(rays, planes, seg, trial, pool, tol, n, n_seg=len(sizes))  # members stay
         in_cluster = in_trial[seg.take(left_idx)]
         idx = left_idx[in_cluster]
         left_idx = left_idx[~in_cluster]
@@ -515,13 +516,13 @@ _COMPILED_SLOPE = True  # slope growth in one compiled loop (False: the rounds b
 
 def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, bg_planes=None,
               depth_only=False, avoid_planes=None, gaps=(1, 2, 3), min_share=0.6, slope=False,
-              pairs: _Pairs | None = None) -> None:
+              pairs: _Pairs | None = None, n_seg: int | None = None) -> None:
     """Grow labels along continuous surfaces until nothing changes (updates ``seg_label`` in place).
     With ``bg_planes`` a segment only joins when its points then lie on those planes; with
     ``avoid_planes`` only when they do not. With ``slope`` (depth only) the neighbour's depth is
     extrapolated by its own step from the stripe beyond it, so a steep surface keeps growing.
-    ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``, when already known."""
-    table = label_table(seg, seg_label)
+    ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``, when already known; ``n_seg`` : seg.max() + 1, if known."""
+    table = label_table(seg, seg_label, n_seg)
     pairs = _neighbour_pairs(seg, long_seg, left, right) if pairs is None else pairs
     if depth_only and not slope and bg_planes is None and avoid_planes is None:  # all rounds compiled
         # (the kernel passes over pairs whose own segment is labelled: no copy of the open ones)
@@ -732,11 +733,13 @@ def _majority(voter: np.ndarray, vote: np.ndarray, n: int, min_share: float) -> 
     return dict(zip(segs.tolist(), labs.tolist(), strict=True))
 
 
-def _refine(rays, planes, seg, seg_label, pairs: _Pairs, tol_mm, n, rounds: int = 3) -> None:
+def _refine(rays, planes, seg, seg_label, pairs: _Pairs, tol_mm, n, rounds: int = 3, n_seg: int | None = None
+            ) -> None:
     """Re-vote each labelled segment by its neighbours (``pairs``: neighbour pairs of its centres, or of a
     superset: pairs of unlabelled segments are passed over); a clear majority for another label (a growth
-    step that took the wrong gap) replaces it. Updates ``seg_label`` in place."""
-    table = label_table(seg, seg_label)
+    step that took the wrong gap) replaces it. Updates ``seg_label`` in place. ``n_seg`` : seg.max() + 1, if
+    known."""
+    table = label_table(seg, seg_label, n_seg)
     changed = _kernels.refine_by_depth(rays, planes, table, pairs.cols, tol_mm, n, np.array((1, 2, 3), np.int64),
                                        GAP_PENALTY_MM, 0.7, rounds)
     for s in changed.tolist():
