@@ -399,6 +399,8 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
     s_sorted = seg[order]
     runs = np.r_[0, np.flatnonzero(s_sorted[1:] != s_sorted[:-1]) + 1, len(seg)]  # a segment each, top down
     sids = s_sorted[runs[:-1]]
+    sid_run = np.full(seg.max() + 1, -1)
+    sid_run[sids] = np.arange(len(sids))  # each segment's run in ``order``
     first = np.full(seg.max() + 1, -1)
     last = np.full(seg.max() + 1, -1)
     first[sids], last[sids] = order[runs[:-1]], order[runs[1:] - 1]
@@ -433,7 +435,8 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
                     near = np.abs(depth_on(rays.take(a[ai], axis=0), planes.take(k, axis=0))
                                   - depth_on(rays.take(b[bi], axis=0), planes.take(k, axis=0))) < tol_mm
                     for sid, lab in zip(dst[bi][near].tolist(), k[near].tolist(), strict=True):
-                        if sid not in done and _lit_share(rays, planes, seg, sid, lab, lit) <= 0.25:
+                        if sid not in done and _lit_share(rays, planes, order[runs[sid_run[sid]]:runs[sid_run[sid] + 1]],
+                                                          lab, lit) <= 0.25:
                             done[sid] = lab
         if not done:
             break
@@ -443,12 +446,11 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
     return out
 
 
-def _lit_share(rays, planes, seg, sid, k, lit) -> float:
-    """Share of segment ``sid``'s cells on light plane ``k`` that lie well inside lit background (0 without
-    ``lit``)."""
+def _lit_share(rays, planes, ii, k, lit) -> float:
+    """Share of the cells of a segment's centres ``ii`` (K,) on light plane ``k`` that lie well inside lit
+    background (0 without ``lit``)."""
     if lit is None or len(lit) == 0:
         return 0.0
-    ii = np.flatnonzero(seg == sid)
     p = intersect(rays[ii], planes[np.full(len(ii), k)])
     cells = k * 1_000_000 + elevation_bins(p, planes, 0.002)
     return float((in_sorted(cells, lit) & in_sorted(cells - 1, lit) & in_sorted(cells + 1, lit)).mean())
