@@ -675,9 +675,12 @@ def _votes(rays, planes, table, pairs: _Pairs, tol_mm, n, depth_only, relabel, m
         best_k = _kernels.depth_votes(rays, planes, table, pairs.cols, at, np.array(gaps, np.int64), tol_mm, n,
                                       GAP_PENALTY_MM, step)
         return _majority(pairs.own_seg[at], best_k, n, min_share)
+    if kernel_layout(rays, planes):  # on flat backgrounds the 3-D gap per stripe is the sharper test
+        best_k = _kernels.gap_votes(rays, planes, table, pairs.cols, at, np.array(gaps, np.int64), tol_mm, n)
+        return _majority(pairs.own_seg[at], best_k, n, min_share)
     idx, nbr, sign, voter, nb_seg, far, far_seg = pairs.take(at)
     kn = table[nb_seg]
-    # on flat backgrounds the 3-D gap per stripe is the sharper test
+    # (the same in NumPy)
     pn = intersect(rays.take(nbr, axis=0), planes.take(kn, axis=0))
     # the voters' points on the planes of every gap at once (row by row as one gap at a time)
     ks = [kn + sign * gap for gap in gaps]

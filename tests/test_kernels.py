@@ -170,3 +170,37 @@ def test_voters_from_grouped_pairs_are_the_voting_pairs_of_a_full_pass():
     got = _voters(cols, table, newly, _members(cols[4], n_seg), _members(cols[3], n_seg))
     assert len(full) > 50
     assert np.array_equal(got, full)
+
+
+def test_gap_votes_pick_the_labels_the_numpy_gap_test_picks():
+    from measurement.triangulation import intersect
+
+    rng = np.random.default_rng(8)
+    n, m, n_seg = 40, 3000, 200
+    ang = np.deg2rad(np.linspace(-12, 12, n))
+    planes = np.column_stack([np.cos(ang), np.zeros(n), np.sin(ang), 250 * np.cos(ang)])
+    rays = np.column_stack([rng.uniform(-0.3, 0.3, m), rng.uniform(-0.2, 0.2, m), np.ones(m)])
+    seg = rng.integers(0, n_seg, m)
+    table = rng.integers(0, n, n_seg)
+    pairs = 2000
+    cols = np.zeros((7, pairs), np.int64)
+    cols[0], cols[1] = rng.integers(0, m, pairs), rng.integers(0, m, pairs)
+    cols[2] = rng.choice([-1, 1], pairs)
+    cols[3], cols[4] = seg[cols[0]], seg[cols[1]]
+    at = np.arange(pairs)
+    gaps, tol = (1, 2, 3), 60.0
+    got = _kernels.gap_votes(rays, planes, table, cols, at, np.array(gaps, np.int64), tol, n)
+    # matching._votes' NumPy form
+    idx, nbr, sign, kn = cols[0], cols[1], cols[2], table[cols[4]]
+    pn = intersect(rays.take(nbr, axis=0), planes.take(kn, axis=0))
+    ks = [kn + sign * gap for gap in gaps]
+    on_k = np.clip(np.concatenate(ks), 0, n - 1)
+    p_gap = intersect(np.tile(rays.take(idx, axis=0), (len(gaps), 1)), planes.take(on_k, axis=0)).reshape(len(gaps), -1, 3)
+    best_k, best_d = np.full(pairs, -1), np.full(pairs, np.inf)
+    for g, gap in enumerate(gaps):
+        k = ks[g]
+        d = np.linalg.norm(p_gap[g] - pn, axis=1) / gap
+        better = (k >= 0) & (k < n) & (d < best_d) & (d < tol)
+        best_k[better], best_d[better] = k[better], d[better]
+    assert (best_k >= 0).sum() > 30
+    assert np.array_equal(got, best_k)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .jit import compiled
-from .rays import _depth
+from .rays import _depth, _point
 
 
 @compiled
@@ -434,3 +434,30 @@ def _voters(cols, table, newly, by_nb, by_own):
     out = out[:k]
     out.sort()
     return out
+
+
+@compiled
+def gap_votes(rays, planes, table, cols, at, gaps, tol_mm, n):
+    """The label (K,) each voting pair ``cols[:, at]`` (``matching._Pairs`` rows) casts by the 3-D gap per
+    stripe: the neighbour's label stepped by each gap (toward the voter) whose plane puts the voter's
+    point nearest the neighbour's, that distance divided by the gap, the first of equals; -1 where none
+    is within ``tol_mm``. The distance is np.linalg.norm's ((0 + x^2) + y^2) + z^2 under a square root."""
+    best = np.full(len(at), -1, np.int64)
+    for q in range(len(at)):
+        p = at[q]
+        idx, nbr, sign = cols[0, p], cols[1, p], cols[2, p]
+        kn = table[cols[4, p]]
+        x0 = _point(rays, nbr, planes, kn, 0)
+        y0 = _point(rays, nbr, planes, kn, 1)
+        z0 = _point(rays, nbr, planes, kn, 2)
+        best_d = np.inf
+        for gap in gaps:
+            k = kn + sign * gap
+            kc = min(max(k, 0), n - 1)
+            dx = _point(rays, idx, planes, kc, 0) - x0
+            dy = _point(rays, idx, planes, kc, 1) - y0
+            dz = _point(rays, idx, planes, kc, 2) - z0
+            d = np.sqrt(((0.0 + dx * dx) + dy * dy) + dz * dz) / gap
+            if 0 <= k < n and d < best_d and d < tol_mm:
+                best[q], best_d = k, d
+    return best
