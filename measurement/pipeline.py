@@ -17,6 +17,7 @@ from .calibration import Calibration
 from .detection import DetectionParams, check_image, detect_centres, reliable
 from .errors import ScanError
 from .matching import Labels, MatchingParams, denoise, label_centres, smooth_along_segments
+from .threads import one_blas_thread
 from .triangulation import intersect, ray_table, rays_at
 
 VIEWS = ("side", "top", "front", "back")
@@ -53,8 +54,15 @@ def scan(image: np.ndarray, calibration: Calibration, view: str = "side", ambien
          params: ScanParams | None = None) -> ScanResult:
     """Reconstruct the animal in one decoded stripe image (H, W) uint8/uint16.
 
-    Raises ScanError/ImageError/StripeDetectionError with a message a technician can act on.
+    Raises ScanError/ImageError/StripeDetectionError with a message a technician can act on. The matrix
+    products run on one BLAS thread (``threads.one_blas_thread``).
     """
+    with one_blas_thread():
+        return _scan(image, calibration, view, ambient, params)
+
+
+def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.ndarray | None,
+          params: ScanParams | None) -> ScanResult:
     params = params or ScanParams()
     if view not in VIEWS:
         raise ScanError(f"view must be one of {', '.join(VIEWS)}, got {view!r}")

@@ -1,0 +1,37 @@
+"""A scan's matrix products run on one BLAS thread, and the caller's setting comes back afterwards."""
+
+import numpy as np
+from threadpoolctl import threadpool_info
+
+from measurement import threads
+
+
+def _blas_threads() -> list[int]:
+    return [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+
+
+def test_one_blas_thread_inside_and_the_previous_count_after():
+    np.ones((4, 4)) @ np.ones((4, 4))  # NumPy's BLAS is loaded
+    before = _blas_threads()
+    assert before
+    with threads.one_blas_thread():
+        assert set(_blas_threads()) == {1}
+    assert _blas_threads() == before
+
+
+def test_a_scan_runs_its_products_on_one_thread(monkeypatch, small_capture):
+    from measurement import pipeline
+    from measurement.calibration import load_calibration
+    from measurement.images import read_image
+
+    seen = []
+    real = pipeline.label_centres
+
+    def spy(*args, **kwargs):
+        seen.append(set(_blas_threads()))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "label_centres", spy)
+    cal = load_calibration(small_capture / "truth" / "truth.json")
+    pipeline.scan(read_image(small_capture / "scan" / "side.png"), cal, "side")
+    assert seen == [{1}]
