@@ -324,25 +324,24 @@ def _pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pair
     labelled[list(seg_label)] = True
     remaining = long_seg & ~labelled[seg]
     sizes = np.bincount(seg[remaining], minlength=seg.max() + 1)  # centres left per segment
-    pool = pairs.of(remaining)  # of the centres left
     left_idx = np.flatnonzero(remaining)  # the centres left, ascending: each piece's are taken from these
+    # the segments a trial may grow over (-1) and those it may not (-2: labelled, short, in an earlier piece)
+    state = np.where(sizes > 0, -1, -2)
+    by_nb, by_own = _kernels.pair_groups(pairs.cols, len(sizes))
+    gaps = np.array((1, 2, 3), np.int64)
     found = []
     while sizes.sum() >= 50:
         seed = int(np.argmax(sizes))
         if sizes[seed] < 30:
             break
-        trial = {seed: mid}
-        _grow_all(c, rays, planes, seg, trial, remaining, left, right, tol, n, None, depth_only=True, pairs=pool,
-                  n_seg=len(sizes))
-        in_trial = np.zeros(len(sizes), bool)
-        in_trial[np.fromiter(trial, np.int64)] = True
-        _refine(rays, planes, seg, trial, pool, tol, n, n_seg=len(sizes))  # members stay
-        in_cluster = in_trial[seg.take(left_idx)]
+        segs, labs = _kernels.grow_piece(rays, planes, pairs.cols, by_nb, by_own, state, seed, mid, tol, n, gaps,
+                                         GAP_PENALTY_MM, 0.6, 40, gaps, 0.7, 3)
+        trial = dict(zip(segs.tolist(), labs.tolist(), strict=True))
+        state[segs] = -2
+        in_cluster = state[seg.take(left_idx)] == -2
         idx = left_idx[in_cluster]
         left_idx = left_idx[~in_cluster]
-        remaining[idx] = False
         sizes -= np.bincount(seg[idx], minlength=len(sizes))
-        pool = pool.take(remaining[pool.idx])
         found.append((idx, trial))
     return found
 
@@ -736,19 +735,6 @@ def _majority(voter: np.ndarray, vote: np.ndarray, n: int, min_share: float) -> 
     [0, n), -1 for a voter that found no label (it still counts as support)."""
     segs, labs = _kernels.majority(voter, vote, n, min_share)
     return dict(zip(segs.tolist(), labs.tolist(), strict=True))
-
-
-def _refine(rays, planes, seg, seg_label, pairs: _Pairs, tol_mm, n, rounds: int = 3, n_seg: int | None = None
-            ) -> None:
-    """Re-vote each labelled segment by its neighbours (``pairs``: neighbour pairs of its centres, or of a
-    superset: pairs of unlabelled segments are passed over); a clear majority for another label (a growth
-    step that took the wrong gap) replaces it. Updates ``seg_label`` in place. ``n_seg`` : seg.max() + 1, if
-    known."""
-    table = label_table(seg, seg_label, n_seg)
-    changed = _kernels.refine_by_depth(rays, planes, table, pairs.cols, tol_mm, n, np.array((1, 2, 3), np.int64),
-                                       GAP_PENALTY_MM, 0.7, rounds)
-    for s in changed.tolist():
-        seg_label[s] = int(table[s])
 
 
 def _enforce_row_order(c: Centres, labels: np.ndarray, order: np.ndarray) -> np.ndarray:

@@ -324,29 +324,43 @@ def test_near_planes_answers_as_the_nearest_plane_distance_does():
         assert np.array_equal(near_planes(points, bg, 8.0), expected)
 
 
-def test_the_compiled_re_vote_corrects_a_slipped_segment_as_the_python_rounds_do():
-    from measurement.matching import _neighbour_pairs, _refine, _votes
-    from measurement.segments import label_table
+def test_a_piece_grown_in_one_compiled_call_is_the_one_the_python_rounds_grow():
+    """``grow_piece`` (trial growth from a seed, then re-votes) against the rounds of ``_votes`` it
+    replaced: the same segments, in the same order, with the same labels; segments marked as taken part
+    in no trial."""
+    from measurement import _kernels
+    from measurement.matching import GAP_PENALTY_MM, _neighbour_pairs, _votes
 
-    planes, rays, seg, left, right, lab = _steep_ramp(0.0, range(10, 17), np.arange(0, 60))
+    planes, rays, seg, left, right, lab = _steep_ramp(-0.3, range(10, 18), np.arange(0, 60))
     pairs = _neighbour_pairs(seg, np.ones(len(seg), bool), left, right)
-    slipped = {s: 10 + s for s in range(7)} | {3: 14}  # segment 3 took a wrong gap: one stripe high
-    tol = 20.0
-
-    reference = dict(slipped)
-    table = label_table(seg, reference)
-    for _ in range(3):  # matching._refine's rounds, one _votes call each
-        votes = _votes(rays, planes, table, pairs, tol, 40, True, True, 0.7, (1, 2, 3))
-        changed = {s: k for s, k in votes.items() if reference.get(s) != k}
-        if not changed:
-            break
-        reference.update(changed)
-        table[list(changed)] = list(changed.values())
-
-    got = dict(slipped)
-    _refine(rays, planes, seg, got, pairs, tol, 40)
-    assert got == reference
-    assert got[3] == 13
+    n_seg, tol, mid = int(seg.max()) + 1, 20.0, 20
+    for taken in ((), (6,)):
+        state = np.full(n_seg, -1)
+        state[list(taken)] = -2
+        table = state.copy()
+        table[3] = mid
+        order = [3]
+        for _ in range(40):  # growth: every open segment beside a labelled one votes
+            votes = _votes(rays, planes, table, pairs, tol, 40, True, False, 0.6, (1, 2, 3),
+                           active=np.asarray(table == -1))
+            if not votes:
+                break
+            for s, k in votes.items():
+                table[s] = k
+                order.append(s)
+        for _ in range(3):  # re-votes of the members
+            votes = _votes(rays, planes, table, pairs, tol, 40, True, True, 0.7, (1, 2, 3))
+            changed = {s: k for s, k in votes.items() if table[s] != k}
+            if not changed:
+                break
+            table[list(changed)] = list(changed.values())
+        gaps = np.array((1, 2, 3), np.int64)
+        segs, labs = _kernels.grow_piece(rays, planes, pairs.cols, *_kernels.pair_groups(pairs.cols, n_seg), state,
+                                         3, mid, tol, 40, gaps, GAP_PENALTY_MM, 0.6, 40, gaps, 0.7, 3)
+        assert segs.tolist() == order
+        assert labs.tolist() == table[order].tolist()
+        assert len(order) == (8 if not taken else 6)  # a taken segment cuts the growth beyond it
+        assert labs.tolist() == [mid + s - 3 for s in order]
 
 
 @pytest.mark.parametrize("slope_mm, tail", [(-1.2, False), (-1.2, True), (-0.4, False), (0.3, True)])

@@ -226,38 +226,6 @@ def gapped_rows(u, order, m, n, window, slack, labels):
 
 
 @compiled
-def refine_by_depth(rays, planes, table, cols, tol_mm, n, gaps, penalty_mm, min_share, rounds):
-    """``matching._refine`` as one loop: up to ``rounds`` rounds in which every labelled segment of
-    ``table`` (S,) is re-voted by depth continuity from its labelled row neighbours (the pairs ``cols``,
-    ``matching._Pairs`` rows; pairs of unlabelled segments are passed over) and takes the majority's
-    label where it differs; stops when none does. Updates ``table`` in place and returns the segments
-    (G,) that changed, in the order of their last change."""
-    everyone = np.ones(len(table), np.bool_)
-    no_step = np.zeros(0)
-    changed = np.zeros(len(table), np.bool_)
-    order = np.empty(len(table), np.int64)
-    m = 0
-    for _ in range(rounds):
-        at = voting_pairs(cols[3], cols[4], table, everyone, True)
-        if len(at) == 0:
-            break
-        best = depth_votes(rays, planes, table, cols, at, gaps, tol_mm, n, penalty_mm, no_step)
-        segs, labs = majority(cols[3][at], best, n, min_share)
-        any_change = False
-        for g in range(len(segs)):
-            if table[segs[g]] != labs[g]:
-                table[segs[g]] = labs[g]
-                if not changed[segs[g]]:
-                    changed[segs[g]] = True
-                    order[m] = segs[g]
-                    m += 1
-                any_change = True
-        if not any_change:
-            break
-    return order[:m]
-
-
-@compiled
 def _slope_step(rays, planes, table, cols, p, zn, tol_mm):
     """For pair ``p`` (``matching._Pairs`` rows ``cols``): whether its neighbour's outer neighbour is on
     the next stripe (``has``), whether the step measured there is usable (evenly spaced, within 2
@@ -403,8 +371,9 @@ def grow_by_slope(rays, planes, table, cols, seg, left, right, tol_mm, n, gaps, 
 def _voters(cols, table, newly, by_nb, by_own):
     """``voting_pairs(cols[3], cols[4], table, flag_beside(cols[3], cols[4], flags of newly), False)`` from
     the pairs grouped by neighbour segment ``by_nb`` and by own segment ``by_own`` (``_members`` of
-    cols[4] and cols[3]): the positions (K,), ascending, of the pairs whose own segment is unlabelled and
-    beside a segment in ``newly`` (G,), and whose neighbour is labelled."""
+    cols[4] and cols[3]): the positions (K,), ascending, of the pairs whose own segment is unlabelled (-1
+    in ``table``; -2 marks a segment that takes no part) and beside a segment in ``newly`` (G,), and whose
+    neighbour is labelled."""
     nb_starts, nb_pairs = by_nb
     own_starts, own_pairs = by_own
     seen = np.zeros(len(table), np.bool_)
@@ -414,7 +383,7 @@ def _voters(cols, table, newly, by_nb, by_own):
         s = newly[g]
         for j in range(nb_starts[s], nb_starts[s + 1]):
             a = cols[3, nb_pairs[j]]
-            if not seen[a] and table[a] < 0:
+            if not seen[a] and table[a] == -1:
                 seen[a] = True
                 active[n_active] = a
                 n_active += 1
@@ -461,3 +430,79 @@ def gap_votes(rays, planes, table, cols, at, gaps, tol_mm, n):
             if 0 <= k < n and d < best_d and d < tol_mm:
                 best[q], best_d = k, d
     return best
+
+
+@compiled
+def _trial_voters(cols, table, trial, by_own):
+    """``voting_pairs(cols[3], cols[4], table, everyone, True)`` when only the segments ``trial`` (G,) are
+    labelled in ``table``: the positions (K,), ascending, of their pairs whose neighbour is labelled."""
+    own_starts, own_pairs = by_own
+    count = 0
+    for g in range(len(trial)):
+        count += own_starts[trial[g] + 1] - own_starts[trial[g]]
+    out = np.empty(count, np.int64)
+    k = 0
+    for g in range(len(trial)):
+        a = trial[g]
+        for j in range(own_starts[a], own_starts[a + 1]):
+            p = own_pairs[j]
+            if table[cols[4, p]] >= 0:
+                out[k] = p
+                k += 1
+    out = out[:k]
+    out.sort()
+    return out
+
+
+@compiled
+def grow_piece(rays, planes, cols, by_nb, by_own, state, seed, mid, tol_mm, n, gaps, penalty_mm, min_share,
+               rounds, refine_gaps, refine_share, refine_rounds):
+    """``matching._pieces``' trial for one seed: growth by depth continuity (``grow_by_depth``) from
+    segment ``seed`` at label ``mid`` over the segments that ``state`` (S,) marks -1 (the others, -2, take
+    no part), then up to ``refine_rounds`` re-votes of its members by the same continuity. Returns the
+    trial's segments (G,) (the seed, then in the order they joined) and their labels (G,)."""
+    table = state.copy()
+    table[seed] = mid
+    out_seg = np.empty(len(table), np.int64)
+    m = 1
+    out_seg[0] = seed
+    no_step = np.zeros(0)
+    newly = out_seg[:1].copy()
+    for _ in range(rounds):
+        at = _voters(cols, table, newly, by_nb, by_own)
+        if len(at) == 0:
+            break
+        best = depth_votes(rays, planes, table, cols, at, gaps, tol_mm, n, penalty_mm, no_step)
+        segs, labs = majority(cols[3][at], best, n, min_share)
+        if len(segs) == 0:
+            break
+        for g in range(len(segs)):
+            table[segs[g]] = labs[g]
+            out_seg[m] = segs[g]
+            m += 1
+        newly = segs
+    trial = out_seg[:m].copy()
+    for _ in range(refine_rounds):
+        at = _trial_voters(cols, table, trial, by_own)
+        if len(at) == 0:
+            break
+        best = depth_votes(rays, planes, table, cols, at, refine_gaps, tol_mm, n, penalty_mm, no_step)
+        segs, labs = majority(cols[3][at], best, n, refine_share)
+        any_change = False
+        for g in range(len(segs)):
+            if table[segs[g]] != labs[g]:
+                table[segs[g]] = labs[g]
+                any_change = True
+        if not any_change:
+            break
+    labels = np.empty(m, np.int64)
+    for g in range(m):
+        labels[g] = table[trial[g]]
+    return trial, labels
+
+
+@compiled
+def pair_groups(cols, n_seg):
+    """The pairs (``matching._Pairs`` rows ``cols``) grouped by neighbour segment and by own segment
+    (``_members`` of cols[4] and cols[3]), for ``_voters``."""
+    return _members(cols[4], n_seg), _members(cols[3], n_seg)
