@@ -55,6 +55,7 @@ from .segments import (
     smooth_along_segments,
     split_at_changes,
 )
+from .threads import second_core
 from .triangulation import depth_in_range, depth_on, intersect, kernel_layout
 
 __all__ = ["Labels", "MatchingParams", "denoise", "label_centres", "link_segments", "smooth_along_segments"]
@@ -195,11 +196,13 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
         return Labels(np.zeros(0, np.int64), None)
     link = params.link_px * max(shape[1] / 3072.0, 0.5)
     order = row_order(c)
-    seg = split_at_changes(c, link_segments(c, link, order))
-    long_seg = np.bincount(seg)[seg] >= params.min_segment_rows
+    linking = second_core().submit(lambda: split_at_changes(c, link_segments(c, link, order)))
     left, right = row_neighbours(c, order)
+    main_rows = main_row_labels(c, n, order)
+    seg = linking.result()
+    long_seg = np.bincount(seg)[seg] >= params.min_segment_rows
     # 1: the background (floor, wall) from complete rows
-    seg_label = _segment_vote(seg, np.where(long_seg, main_row_labels(c, n, order), -1))
+    seg_label = _segment_vote(seg, np.where(long_seg, main_rows, -1))
     labels = _labels_of(seg, seg_label, long_seg)
     # 2: a stripe that continued across the animal's outline in the image carried a background index
     # onto the animal; such centres sit off the background surfaces: cut them off as foreground

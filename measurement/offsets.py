@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 from functools import lru_cache
 
 import numpy as np
 
 from . import _kernels
 from .planes import pencil_axis
+from .threads import second_core
 from .triangulation import intersect
 
 _log = logging.getLogger(__name__)
@@ -80,7 +81,7 @@ class BinTable:
         interpreter), while the caller goes on; the first ``table``/``rows`` call waits for them. A scan
         fills in the centres its pieces may come from while it grows the pieces."""
         self._wait()
-        self._pending = _background().submit(self._fill, idx)
+        self._pending = second_core().submit(self._fill, idx)
 
     def _wait(self) -> None:
         if self._pending is not None:
@@ -106,17 +107,6 @@ class BinTable:
             self._data[r:r + len(new)] = _bins_on_planes(self.rays.take(new, axis=0), self.planes, self.bins)
             self._rows = r + len(new)
         return self._data[:self._rows], self._slot[idx]
-
-
-_EXECUTOR: ThreadPoolExecutor | None = None
-
-
-def _background() -> ThreadPoolExecutor:
-    """One worker thread for ``BinTable.prefill``, started on first use."""
-    global _EXECUTOR
-    if _EXECUTOR is None:
-        _EXECUTOR = ThreadPoolExecutor(1, thread_name_prefix="bodyscan-bins")
-    return _EXECUTOR
 
 
 def _bins_on_planes(rays: np.ndarray, planes: np.ndarray, bins: float, chunk: int = 2048) -> np.ndarray:

@@ -9,9 +9,20 @@ its products on one thread; its own parallel parts (detection's bands) are threa
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import AbstractContextManager
 
 _controller = None
+_executor: ThreadPoolExecutor | None = None
+
+
+def second_core() -> ThreadPoolExecutor:
+    """One worker thread for the parts of a scan that can run beside the main one (the compiled kernels and
+    large NumPy operations release the interpreter), started on first use."""
+    global _executor
+    if _executor is None:
+        _executor = ThreadPoolExecutor(1, thread_name_prefix="bodyscan")
+    return _executor
 
 
 def one_blas_thread() -> AbstractContextManager:
