@@ -21,6 +21,7 @@ from functools import cached_property
 import cv2
 import numpy as np
 
+from . import _kernels
 from .errors import ImageError, StripeDetectionError
 
 
@@ -215,22 +216,16 @@ def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams
     bg = cv2.erode(s, np.ones((1, _scaled(params.background_px, w, odd=True)), np.uint8))
     contrast = cv2.subtract(s, bg)
     peak = cv2.dilate(s, np.ones((1, 2 * _scaled(params.peak_px, w) + 1), np.uint8))
-    cand = cv2.compare(s, peak, cv2.CMP_EQ)
     low = params.weak_contrast if params.weak_contrast > 0 else params.min_contrast
-    cand = cv2.bitwise_and(cand, cv2.compare(contrast, np.full_like(contrast, int(low)), cv2.CMP_GT))
-    # on a flat-topped peak keep only its first pixel: strictly brighter than the left neighbour
-    first = np.zeros_like(cand)
-    first[:, 1:] = cv2.compare(s[:, 1:], s[:, :-1], cv2.CMP_GT)
-    # the peaks in raster order, as cv2.findNonZero lists them: NumPy finds them in a 0/1 mask viewed as
-    # bool several times faster
-    at = np.flatnonzero(np.bitwise_and(cv2.bitwise_and(cand, first), 1).view(bool))
-    if len(at) == 0:
-        none = np.zeros(0, np.float32)
-        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), none, none, none
+    # 0/1: as bright as every pixel within peak_px columns, and more than low above the background
+    cand = cv2.bitwise_and(cv2.compare(s, peak, cv2.CMP_EQ), cv2.threshold(contrast, int(low), 1, cv2.THRESH_BINARY)[1])
+    # on a flat-topped peak keep only its first pixel (strictly brighter than the left neighbour); then
+    # the centroids, widths and flanks of the peaks in one compiled pass (the NumPy form they replaced is
+    # in tests/test_detection_kernels.py)
+    at = _kernels.first_peaks(cand, s)
+    u, width, flank, contrast_at = _kernels.refine_peaks(s, bg, at, _scaled(params.background_px, w) // 2 + 1)
     y = at // w
-    x = at - y * w
-    u, width, flank = _refine(s, bg, x, y, _scaled(params.background_px, w) // 2 + 1)
-    return x, y + a, u, contrast[y, x].astype(np.float32), width, flank
+    return at - y * w, y + a, u, contrast_at, width, flank
 
 
 def _linked(x: np.ndarray, y: np.ndarray, w: int, strong: np.ndarray, weak: np.ndarray, link: float
@@ -278,31 +273,6 @@ def reliable(c: Centres, params: DetectionParams = DetectionParams()) -> np.ndar
     if len(c) and params.max_width > 0:
         ok &= c.width <= params.max_width * c.median_width
     return ok
-
-
-def _refine(s: np.ndarray, bg: np.ndarray, x: np.ndarray, y: np.ndarray, half: int
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Centroid of the part of each peak above half its height, within +-half pixels; that part's width;
-    and the peak's height above the higher of its two side minima (within half - 1 pixels each side)."""
-    n = 2 * half + 1
-    # (n, M) window of each peak, the row's end pixel repeated past the border
-    pad = cv2.copyMakeBorder(s, 0, 0, half, half, cv2.BORDER_REPLICATE)
-    raw = np.ascontiguousarray(np.lib.stride_tricks.sliding_window_view(pad, n, axis=1)[y, x].T)
-    # each side window holds the peak itself, so the difference cannot wrap around in uint8
-    flank = raw[half] - np.maximum(raw[1:half + 1].min(axis=0), raw[half:2 * half].min(axis=0))
-    # twice each pixel's height above the level (half way from the background to the peak): integers,
-    # so the centroid below is the exact ratio whatever the order of summation
-    h2 = raw.astype(np.int16) * 2 - (bg[y, x].astype(np.int16) + raw[half])
-    # keep only the contiguous run through the peak (a neighbouring stripe must not pull the centroid);
-    run = h2 > 0
-    for k in range(1, half + 1):
-        run[half + k] &= run[half + k - 1]
-        run[half - k] &= run[half - k + 1]
-    wts = h2 * run
-    offs = np.arange(-half, half + 1, dtype=np.int16)
-    u = x + (wts * offs[:, None]).sum(axis=0, dtype=np.int32) / np.maximum(wts.sum(axis=0, dtype=np.int32), 1)
-    width = run.sum(axis=0)
-    return u.astype(np.float64), width.astype(np.float32), flank.astype(np.float32)
 
 
 def check_image(image: np.ndarray, expected: tuple[int, int] | None, name: str = "image") -> None:

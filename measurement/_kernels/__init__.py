@@ -10,6 +10,7 @@ none is writable the kernels are compiled in memory on each start."""
 from __future__ import annotations
 
 from .background import group_counts, near_any_plane
+from .detection import first_peaks, refine_peaks
 from .growth import (
     depth_votes,
     flag_beside,
@@ -47,4 +48,6 @@ __all__ = [
     "segment_steps",
     "smooth_runs",
     "voting_pairs",
+    "first_peaks",
+    "refine_peaks",
 ]

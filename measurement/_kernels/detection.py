@@ -1,0 +1,95 @@
+"""Peak listing and sub-pixel refinement of stripe centres (``measurement.detection``): one pass over the
+candidates instead of more full-frame masks and (window, peak) arrays. Integer arithmetic throughout, so
+the centres are those of the NumPy form to the bit (tests/test_detection_kernels.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .jit import compiled
+
+
+@compiled
+def _rising(s, j, w):
+    """Whether flat pixel j of s (h, w) is strictly brighter than its left neighbour (never column 0)."""
+    y = j // w
+    x = j - y * w
+    return x > 0 and s[y, x] > s[y, x - 1]
+
+
+@compiled
+def first_peaks(mask, s):
+    """Flat indices (K,) int64, in raster order, of the pixels marked in ``mask`` (h, w) uint8 0/1 that
+    are strictly brighter than their left neighbour in s (h, w) uint8: the first pixel of a flat top."""
+    w = s.shape[1]
+    flat = mask.reshape(-1)
+    words = flat[: len(flat) // 8 * 8].view(np.uint64)  # eight pixels at a time: the mask is sparse
+    out = np.empty(len(flat) // 2 + 1, np.int64)  # a rising pixel's right neighbour is never a peak too
+    k = 0
+    for q in range(len(words)):
+        if words[q] == 0:
+            continue
+        for j in range(8 * q, 8 * q + 8):
+            if flat[j] and _rising(s, j, w):
+                out[k] = j
+                k += 1
+    for j in range(len(words) * 8, len(flat)):
+        if flat[j] and _rising(s, j, w):
+            out[k] = j
+            k += 1
+    return out[:k].copy()
+
+
+@compiled
+def refine_peaks(s, bg, at, half):
+    """The peaks at flat indices ``at`` (K,) of s (h, w) uint8 over the background bg (h, w) uint8 (bg <= s):
+    u (K,) float64, the centroid column of the run of pixels through the peak above half its height
+    (twice the height above the level half way from bg to the peak, integers: the exact ratio), within
+    +-``half`` pixels, the row's end pixel repeated past the border; that run's width (K,) float32; the
+    flank (K,) float32, the peak's height above the higher of its side minima (within half - 1 pixels
+    each side); the contrast s - bg (K,) float32."""
+    w = s.shape[1]
+    n = len(at)
+    u = np.empty(n)
+    width = np.empty(n, np.float32)
+    flank = np.empty(n, np.float32)
+    contrast = np.empty(n, np.float32)
+    pad = np.empty(2 * half + 1, np.uint8)
+    for i in range(n):
+        y = at[i] // w
+        x = at[i] - y * w
+        raw = s[y, x - half:x + half + 1]
+        if x < half or x + half >= w:
+            for k in range(2 * half + 1):
+                pad[k] = s[y, min(max(x - half + k, 0), w - 1)]
+            raw = pad
+        peak, back = np.int64(raw[half]), np.int64(bg[y, x])
+        left, right = peak, peak
+        for k in range(1, half):
+            left = min(left, np.int64(raw[k]))
+            right = min(right, np.int64(raw[half + k]))
+        flank[i] = peak - max(left, right)
+        contrast[i] = peak - back
+        num, den, run = _run_moments(raw, half, back + peak)
+        u[i] = x + num / max(den, 1)
+        width[i] = run
+    return u, width, flank, contrast
+
+
+@compiled
+def _run_moments(raw, half, level):
+    """Sum of offset x weight, sum of weights and length of the run through the centre of the window raw
+    (2 half + 1,) where the weight 2 raw - level stays positive."""
+    h2 = 2 * np.int64(raw[half]) - level
+    if h2 <= 0:
+        return 0, 0, 0
+    num, den, run = 0, h2, 1
+    for sign in (1, -1):
+        for k in range(1, half + 1):
+            h2 = 2 * np.int64(raw[half + sign * k]) - level
+            if h2 <= 0:
+                break
+            num += sign * k * h2
+            den += h2
+            run += 1
+    return num, den, run
