@@ -8,6 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _kernels
+
 
 @dataclass(frozen=True)
 class BodyParams:
@@ -73,6 +75,19 @@ def isolate(points: np.ndarray, background: np.ndarray | None, params: BodyParam
     out = np.zeros(len(points), bool)
     out[idx[lab == biggest]] = True
     return out
+
+
+def _extents(points: np.ndarray, first: np.ndarray, last: np.ndarray, trim: float
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """``_extent`` of each group points[first[g]:last[g]] (G,) of points (N, 3) mm: extents (G,) mm and
+    extreme points (G, 2, 3) mm. Compiled, all groups in one call; NumPy where a point is not finite or a
+    pass keeps under 5 points."""
+    ends = np.zeros((len(first), 2, 3))
+    finite = bool(np.isfinite(points).all())
+    ext = _kernels.group_extents(points, first, last, trim, ends) if finite else np.full(len(first), np.nan)
+    for g in np.flatnonzero(np.isnan(ext)):
+        ext[g], ends[g] = _extent(points[first[g]:last[g]], trim)
+    return ext, ends
 
 
 def _extent(points: np.ndarray, trim: float) -> tuple[float, np.ndarray]:
@@ -142,8 +157,9 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
     order = np.argsort(stripe, kind="stable")
     ks_sorted, ks_arr = stripe[order], np.array(groups)
     first, last = np.searchsorted(ks_sorted, ks_arr), np.searchsorted(ks_sorted, ks_arr, side="right")
-    extents = [(*_extent(points[order[a:b]], params.trim), k) for k, a, b in zip(groups, first, last, strict=True)]
-    ext, ends, k_best = max(extents, key=lambda e: e[0])
+    exts, all_ends = _extents(np.asarray(points[order], np.float64), first, last, params.trim)
+    best = max(range(len(groups)), key=lambda g: exts[g])  # the first of equals, as max() of the groups
+    ext, ends, k_best = float(exts[best]), all_ends[best], groups[best]
     name = "body_width" if view == "top" else "body_height"
     out["body_height_mm"] = round(ext, 2)
     out[name] = {"value_mm": round(ext, 2), "stripe": k_best, "points": ends.tolist()}
@@ -160,17 +176,15 @@ def _length(points, stripe, rows, groups, min_rows) -> dict | None:
     """Mean distance between the first and last stripe groups over the image rows both have; if they
     share fewer than ``min_rows`` rows, the outermost pair that does (largest index span, then most
     shared rows)."""
-    row_sets = {k: np.unique(rows[stripe == k]) for k in groups}
+    has, top = _row_table(stripe, rows, groups)
     for span in range(len(groups) - 1, 0, -1):
-        best = None
-        for a_i in range(len(groups) - span):
-            a, b = groups[a_i], groups[a_i + span]
-            shared = np.intersect1d(row_sets[a], row_sets[b], assume_unique=True)
-            if len(shared) >= min_rows and (best is None or len(shared) > len(best[2])):
-                best = (a, b, shared)
-        if best is None:
+        counts = np.count_nonzero(has[:-span] & has[span:], axis=1)  # shared rows of each pair this far apart
+        ok = np.flatnonzero(counts >= min_rows)
+        if len(ok) == 0:
             continue
-        a, b, shared = best
+        a_i = int(ok[np.argmax(counts[ok])])  # the first of the most
+        a, b = groups[a_i], groups[a_i + span]
+        shared = np.flatnonzero(has[a_i] & has[a_i + span]) + top
         ma, mb = stripe == a, stripe == b
         pa = _per_row(points[ma], rows[ma], shared)
         pb = _per_row(points[mb], rows[mb], shared)
@@ -185,6 +199,18 @@ def _length(points, stripe, rows, groups, min_rows) -> dict | None:
     return None
 
 
+def _row_table(stripe: np.ndarray, rows: np.ndarray, groups: list[int]) -> tuple[np.ndarray, int]:
+    """(G, R) bool: whether group g (stripe ``groups[g]``, ascending) has a point in image row top + r,
+    and top, the first row of any point."""
+    top = int(rows.min())
+    has = np.zeros((len(groups), int(rows.max()) - top + 1), bool)
+    ks = np.array(groups)
+    g = np.minimum(np.searchsorted(ks, stripe), len(ks) - 1)
+    mine = ks[g] == stripe
+    has[g[mine], rows[mine] - top] = True
+    return has, top
+
+
 def _per_row(points: np.ndarray, rows: np.ndarray, shared: np.ndarray) -> np.ndarray:
     order = np.argsort(rows, kind="stable")
     r, p = rows[order], points[order]
@@ -194,7 +220,10 @@ def _per_row(points: np.ndarray, rows: np.ndarray, shared: np.ndarray) -> np.nda
 
 def _box(points: np.ndarray) -> dict:
     c = points.mean(axis=0)
-    _, _, vt = np.linalg.svd(points - c, full_matrices=False)
+    # the SVD of the QR factor R: np.linalg.svd's own first step for a tall matrix (the same axes to the
+    # bit), without forming the (N, 3) left singular vectors
+    _, _, vt = np.linalg.svd(np.linalg.qr(points - c, mode="r")) if len(points) >= 5 else \
+        np.linalg.svd(points - c, full_matrices=False)
     t = (points - c) @ vt.T
     lo, hi = np.quantile(t, [0.01, 0.99], axis=0)
     size = hi - lo

@@ -84,3 +84,89 @@ def test_column_medians_equal_np_median_bit_for_bit():
     x = rng.normal(size=(9, 3))
     x[4, 1] = np.nan
     assert np.array_equal(_column_medians(x), np.median(x, axis=0), equal_nan=True)
+
+
+def _groups(seed: int, n_groups: int = 12):
+    """Stripe groups of a few to several hundred points along random directions, some with specks, some
+    with tied coordinates, in stripe order."""
+    rng = np.random.default_rng(seed)
+    pts, stripe = [], []
+    for k in range(n_groups):
+        n = int(rng.integers(5, 700))
+        g = rng.normal(size=(n, 3)) * rng.uniform(0.1, 100, 3)
+        g = g @ np.linalg.qr(rng.normal(size=(3, 3)))[0] + rng.normal(size=3) * 300
+        if k % 3 == 0:
+            g[:4] += rng.normal(size=(4, 3)) * 500
+        if k % 4 == 1:
+            g = g.round(0)
+        pts.append(g)
+        stripe.append(np.full(n, k))
+    return np.vstack(pts), np.concatenate(stripe)
+
+
+def test_compiled_extents_equal_the_numpy_extent_of_each_group():
+    from measurement.body import _extent, _extents
+
+    for seed in range(8):
+        pts, stripe = _groups(seed)
+        first = np.searchsorted(stripe, np.unique(stripe))
+        last = np.searchsorted(stripe, np.unique(stripe), side="right")
+        ext, ends = _extents(pts, first, last, 0.01)
+        for g, (a, b) in enumerate(zip(first, last, strict=True)):
+            want, want_ends = _extent(pts[a:b], 0.01)
+            assert abs(ext[g] - want) <= 1e-12 * abs(want)
+            assert np.allclose(ends[g], want_ends, rtol=1e-12, atol=1e-9)  # the same sign of the direction
+
+
+def test_extents_of_tiny_or_non_finite_groups_fall_back_to_numpy():
+    import pytest
+
+    from measurement.body import _extent, _extents
+
+    pts, _ = _groups(1, 2)
+    ext, ends = _extents(pts, np.array([0, 3]), np.array([3, 40]), 0.01)
+    for g, (a, b) in enumerate([(0, 3), (3, 40)]):
+        want, want_ends = _extent(pts[a:b], 0.01)
+        assert abs(ext[g] - want) <= 1e-12 * abs(want) and np.allclose(ends[g], want_ends, rtol=1e-12)
+    pts[7, 1] = np.nan  # as np.linalg.svd does, refused
+    with pytest.raises(np.linalg.LinAlgError):
+        _extents(pts, np.array([0, 3]), np.array([3, 40]), 0.01)
+
+
+def _length_reference(points, stripe, rows, groups, min_rows):
+    """The outermost pair of groups sharing at least min_rows image rows, by set intersections."""
+    row_sets = {k: np.unique(rows[stripe == k]) for k in groups}
+    for span in range(len(groups) - 1, 0, -1):
+        best = None
+        for a_i in range(len(groups) - span):
+            a, b = groups[a_i], groups[a_i + span]
+            shared = np.intersect1d(row_sets[a], row_sets[b], assume_unique=True)
+            if len(shared) >= min_rows and (best is None or len(shared) > len(best[2])):
+                best = (a, b, shared)
+        if best is not None:
+            return best[0], best[1], len(best[2])
+    return None
+
+
+def test_length_takes_the_pair_the_row_set_intersections_take():
+    from measurement.body import _length
+
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        pts, stripe, rows = _barrel(n_stripes=int(rng.integers(2, 15)), rows=40)
+        rows = rows + rng.integers(-25, 25, len(stripe)).clip(-10, 10) * (stripe % 3)  # shifted, with repeats
+        keep = rng.random(len(stripe)) > 0.3
+        pts, stripe, rows = pts[keep], stripe[keep], rows[keep] + 100
+        groups = [int(k) for k in np.unique(stripe)]
+        got, want = _length(pts, stripe, rows, groups, 10), _length_reference(pts, stripe, rows, groups, 10)
+        assert (got is None) == (want is None)
+        if got is not None:
+            assert (got["stripes"][0], got["stripes"][1], got["rows"]) == want
+
+
+def test_oriented_box_axes_are_np_linalg_svd_s_to_the_bit():
+    from measurement.body import _box
+
+    pts, _, _ = _barrel()
+    c = pts.mean(axis=0)
+    assert np.array_equal(np.array(_box(pts)["axes"]), np.linalg.svd(pts - c, full_matrices=False)[2])

@@ -10,6 +10,7 @@ none is writable the kernels are compiled in memory on each start."""
 from __future__ import annotations
 
 from .background import group_counts, near_any_plane
+from .body import group_extents
 from .detection import first_peaks, refine_peaks
 from .growth import (
     depth_votes,
@@ -50,4 +51,5 @@ __all__ = [
     "voting_pairs",
     "first_peaks",
     "refine_peaks",
+    "group_extents",
 ]
