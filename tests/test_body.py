@@ -170,3 +170,14 @@ def test_oriented_box_axes_are_np_linalg_svd_s_to_the_bit():
     pts, _, _ = _barrel()
     c = pts.mean(axis=0)
     assert np.array_equal(np.array(_box(pts)["axes"]), np.linalg.svd(pts - c, full_matrices=False)[2])
+
+
+def test_plane_products_in_blocks_equal_one_matrix_product_to_the_bit():
+    from measurement.body import _plane_products
+
+    rng = np.random.default_rng(7)
+    for n in (1, 4095, 4096, 4097, 30_000, 87_565):
+        for planes in (1, 2, 3):
+            pts = rng.normal(size=(n, 3)) * 400 + [0, 100, 1500]
+            bg = rng.normal(size=(planes, 4))
+            assert np.array_equal(_plane_products(pts, bg[:, :3].T), pts @ bg[:, :3].T)
