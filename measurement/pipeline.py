@@ -17,7 +17,7 @@ from .calibration import Calibration
 from .detection import DetectionParams, check_image, detect_centres, reliable
 from .errors import ScanError
 from .matching import Labels, MatchingParams, denoise, label_centres, smooth_along_segments
-from .triangulation import intersect, ray_table, rays_at
+from .triangulation import cloud_points, ray_table, rays_and_cells
 
 VIEWS = ("side", "top", "front", "back")
 
@@ -68,7 +68,8 @@ def scan(image: np.ndarray, calibration: Calibration, view: str = "side", ambien
     if len(centres) and params.matching.denoise:
         centres = centres.take(denoise(centres, image.shape[:2]))
     t["denoise"] = time.perf_counter()
-    rays = rays_at(centres.u, centres.v, ray_table(calibration.intrinsics))
+    table = ray_table(calibration.intrinsics)
+    rays, cells = rays_and_cells(centres.u, centres.v, table)
     labels = label_centres(centres, rays, calibration.planes, image.shape[:2], params.matching)
     t["match"] = time.perf_counter()
     seg_ids = labels.segment if labels.segment is not None else np.arange(len(centres))
@@ -83,8 +84,8 @@ def scan(image: np.ndarray, calibration: Calibration, view: str = "side", ambien
                 else "is this calibration for this rig and stripe count?")
         raise ScanError(f"no stripe could be matched to the calibration's {calibration.stripes} light planes "
                         f"(rows show about {n_found} stripes): {hint}")
-    rays_s = rays_at(smooth_u[ok], centres.v[ok], ray_table(calibration.intrinsics))
-    pts = intersect(rays_s, calibration.planes.take(labels.stripe[ok], axis=0))
+    pts = cloud_points(smooth_u, centres.u, centres.v, np.flatnonzero(ok), labels.stripe, cells, table,
+                       calibration.planes)
     uv = np.column_stack([smooth_u[ok], centres.v[ok]])
     stripe = labels.stripe[ok]
     t["triangulate"] = time.perf_counter()

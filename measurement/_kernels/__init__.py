@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from .background import group_counts, near_any_plane
 from .body import group_extents
+from .cloud import cloud_points, rays_and_cells
 from .detection import first_peaks, refine_peaks
 from .growth import (
     depth_votes,
@@ -52,4 +53,6 @@ __all__ = [
     "first_peaks",
     "refine_peaks",
     "group_extents",
+    "rays_and_cells",
+    "cloud_points",
 ]
