@@ -60,22 +60,31 @@ def isolate(points: np.ndarray, background: np.ndarray | None, params: BodyParam
     idx = np.nonzero(keep)[0]
     if len(idx) < params.min_group:
         return np.zeros(len(points), bool)
-    voxel = params.cluster_mm
-    kept = points[idx]
-    ijk = np.floor((kept - kept.min(axis=0)) / voxel).astype(np.int64)
-    shape = tuple(ijk.max(axis=0) + 1)
+    cells, shape = _voxel_cells(points, idx, params.cluster_mm)
     if np.prod(shape) > 60_000_000:  # absurdly spread cloud: fall back to one cluster
         out = np.zeros(len(points), bool)
         out[idx] = True
         return out
-    grid = np.zeros(shape, bool)
-    grid[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = True
-    labels, _ = ndimage.label(grid, structure=np.ones((3, 3, 3), bool))
-    lab = labels[ijk[:, 0], ijk[:, 1], ijk[:, 2]]
+    grid = np.zeros(int(np.prod(shape)), bool)
+    grid[cells] = True
+    labels, _ = ndimage.label(grid.reshape(shape), structure=np.ones((3, 3, 3), bool))
+    lab = labels.ravel()[cells]
     biggest = np.argmax(np.bincount(lab)[1:]) + 1
     out = np.zeros(len(points), bool)
     out[idx[lab == biggest]] = True
     return out
+
+
+def _voxel_cells(points: np.ndarray, idx: np.ndarray, voxel: float) -> tuple[np.ndarray, tuple[int, ...]]:
+    """Voxel (flat index (K,) into a C-ordered grid) of each point ``idx`` (K,) of points (N, 3) mm, cells of
+    ``voxel`` mm counted from the points' lowest corner, and the grid's shape (3 ints)."""
+    if points.dtype == np.float64 and points.ndim == 2 and points.shape[1] == 3:
+        flat, shape = _kernels.voxel_cells(points, idx, float(voxel))
+        return flat, tuple(int(n) for n in shape)
+    kept = points[idx]
+    ijk = np.floor((kept - kept.min(axis=0)) / voxel).astype(np.int64)
+    grid_shape = tuple(int(n) for n in ijk.max(axis=0) + 1)
+    return np.ravel_multi_index(tuple(ijk.T), grid_shape), grid_shape
 
 
 _PRODUCT_ROWS = 4096

@@ -181,3 +181,20 @@ def test_plane_products_in_blocks_equal_one_matrix_product_to_the_bit():
             pts = rng.normal(size=(n, 3)) * 400 + [0, 100, 1500]
             bg = rng.normal(size=(planes, 4))
             assert np.array_equal(_plane_products(pts, bg[:, :3].T), pts @ bg[:, :3].T)
+
+
+def test_compiled_voxel_cells_equal_the_numpy_floor_of_the_offsets():
+    from measurement import _kernels
+
+    rng = np.random.default_rng(9)
+    for n in (1, 2, 50, 20_000):
+        pts = rng.normal(size=(n, 3)) * rng.uniform(1, 400, 3) + [0, 50, 1200]
+        pts[: n // 3] = pts[: n // 3].round(-1)  # on voxel borders too
+        idx = np.flatnonzero(rng.random(n) < 0.7) if n > 2 else np.arange(n)
+        if len(idx) == 0:
+            continue
+        kept = pts[idx]
+        ijk = np.floor((kept - kept.min(axis=0)) / 25.0).astype(np.int64)
+        shape = tuple(ijk.max(axis=0) + 1)
+        flat, got_shape = _kernels.voxel_cells(pts, idx, 25.0)
+        assert tuple(got_shape) == shape and np.array_equal(flat, np.ravel_multi_index(tuple(ijk.T), shape))

@@ -10,7 +10,7 @@ none is writable the kernels are compiled in memory on each start."""
 from __future__ import annotations
 
 from .background import group_counts, near_any_plane
-from .body import group_extents
+from .body import group_extents, voxel_cells
 from .cloud import cloud_points, rays_and_cells
 from .detection import first_peaks, refine_peaks
 from .growth import (
@@ -55,4 +55,5 @@ __all__ = [
     "group_extents",
     "rays_and_cells",
     "cloud_points",
+    "voxel_cells",
 ]

@@ -103,3 +103,27 @@ def group_extents(points, first, last, trim, ends):
     for g in range(len(first)):
         out[g] = group_extent(points[first[g]:last[g]], trim, ends[g])
     return out
+
+
+@compiled
+def voxel_cells(points, idx, voxel):
+    """Voxels of ``voxel`` mm of the points ``idx`` (K,) of points (N, 3) mm (finite), counted from their
+    lowest corner: np.floor((p - p.min(axis=0)) / voxel) as ``body.isolate`` took it; returns each point's
+    cell as a flat index (K,) int64 into the C-ordered grid of shape (3,) int64 that holds them all."""
+    lo = np.empty(3)
+    for d in range(3):
+        lo[d] = points[idx[0], d]
+    for i in idx:
+        for d in range(3):
+            lo[d] = min(lo[d], points[i, d])
+    ijk = np.empty((len(idx), 3), np.int64)
+    shape = np.zeros(3, np.int64)
+    for q in range(len(idx)):
+        for d in range(3):
+            c = np.int64(np.floor((points[idx[q], d] - lo[d]) / voxel))
+            ijk[q, d] = c
+            shape[d] = max(shape[d], c + 1)
+    flat = np.empty(len(idx), np.int64)
+    for q in range(len(idx)):
+        flat[q] = (ijk[q, 0] * shape[1] + ijk[q, 1]) * shape[2] + ijk[q, 2]
+    return flat, shape
