@@ -135,12 +135,9 @@ def detect_centres(image: np.ndarray, params: DetectionParams = DetectionParams(
     # so the filters' images stay in cache, and the bands share the cores (OpenCV and NumPy release the
     # GIL): the same centres to the bit
     h, w = g.shape
+    # (the flat top of a wide stripe is a run of equal gray levels that a one-level dip can cut in two:
+    # both halves pass the non-maximum suppression and refine to the same centroid; the bands keep one)
     x, y, u, contrast, width, flank = _all_bands(g, params)
-    # the flat top of a wide stripe is a run of equal gray levels that a one-level dip can cut in two: both
-    # halves pass the non-maximum suppression and refine to the same centroid. One centre per peak
-    one = np.r_[True, (y[1:] != y[:-1]) | (u[1:] - u[:-1] >= 0.5)]
-    if not one.all():
-        x, y, u, contrast, width, flank = (z[one] for z in (x, y, u, contrast, width, flank))
     c = Centres(u, y.astype(np.int32), contrast, width, flank)
     if params.weak_contrast <= 0 or params.weak_contrast >= params.min_contrast:
         return c
@@ -205,8 +202,8 @@ def noise_sigma(g: np.ndarray) -> float:
 
 def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Candidate centres of rows a..b-1 of the gray image g (H, W) uint8: x, y (int64 pixels), u, contrast,
-    width and flank (see Centres), in raster order."""
+    """Candidate centres of rows a..b-1 of the gray image g (H, W) uint8, one per peak: x, y (int64 pixels),
+    u, contrast, width and flank (see Centres), in raster order."""
     h, w = g.shape
     sigma_y = params.sigma_y * max(w / 3072.0, 0.5)
     margin = int(4 * sigma_y) + 2  # beyond the blur's reach (OpenCV's 8-bit kernel: radius ~3 sigma)
@@ -218,14 +215,15 @@ def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams
     peak = cv2.dilate(s, np.ones((1, 2 * _scaled(params.peak_px, w) + 1), np.uint8))
     low = params.weak_contrast if params.weak_contrast > 0 else params.min_contrast
     # 0/1: as bright as every pixel within peak_px columns, and more than low above the background
-    cand = cv2.bitwise_and(cv2.compare(s, peak, cv2.CMP_EQ), cv2.threshold(contrast, int(low), 1, cv2.THRESH_BINARY)[1])
+    strong = cv2.threshold(contrast, int(low), 1, cv2.THRESH_BINARY)[1]
+    cand = cv2.bitwise_and(cv2.compare(s, peak, cv2.CMP_EQ), strong)
     # on a flat-topped peak keep only its first pixel (strictly brighter than the left neighbour); then
-    # the centroids, widths and flanks of the peaks in one compiled pass (the NumPy form they replaced is
-    # in tests/test_detection_kernels.py)
+    # the centroids, widths and flanks of the peaks in one compiled pass, one centre per peak (the NumPy
+    # form they replaced is in tests/test_detection_kernels.py)
     at = _kernels.first_peaks(cand, s)
-    u, width, flank, contrast_at = _kernels.refine_peaks(s, bg, at, _scaled(params.background_px, w) // 2 + 1)
-    y = at // w
-    return at - y * w, y + a, u, contrast_at, width, flank
+    half = _scaled(params.background_px, w) // 2 + 1
+    x, y, u, width, flank, contrast_at = _kernels.refine_peaks(s, bg, at, half, a)
+    return x, y, u, contrast_at, width, flank
 
 
 def _linked(x: np.ndarray, y: np.ndarray, w: int, strong: np.ndarray, weak: np.ndarray, link: float

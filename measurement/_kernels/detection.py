@@ -41,20 +41,25 @@ def first_peaks(mask, s):
 
 
 @compiled
-def refine_peaks(s, bg, at, half):
-    """The peaks at flat indices ``at`` (K,) of s (h, w) uint8 over the background bg (h, w) uint8 (bg <= s):
-    u (K,) float64, the centroid column of the run of pixels through the peak above half its height
-    (twice the height above the level half way from bg to the peak, integers: the exact ratio), within
-    +-``half`` pixels, the row's end pixel repeated past the border; that run's width (K,) float32; the
-    flank (K,) float32, the peak's height above the higher of its side minima (within half - 1 pixels
-    each side); the contrast s - bg (K,) float32."""
+def refine_peaks(s, bg, at, half, row0):
+    """The peaks at flat indices ``at`` (K,) (raster order) of s (h, w) uint8 over the background bg (h, w)
+    uint8 (bg <= s), one per peak: x, y (P,) int64 pixels (y counted from ``row0``); u (P,) float64, the
+    centroid column of the run of pixels through the peak above half its height (twice the height above
+    the level half way from bg to the peak, integers: the exact ratio), within +-``half`` pixels, the row's
+    end pixel repeated past the border; that run's width (P,) float32; the flank (P,) float32, the peak's
+    height above the higher of its side minima (within half - 1 pixels each side); the contrast s - bg
+    (P,) float32. A peak whose centroid lies less than half a pixel right of the previous one's in its row
+    is the other half of a flat top cut by a one-level dip (the same centroid): it is left out."""
     w = s.shape[1]
     n = len(at)
+    x_out, y_out = np.empty(n, np.int64), np.empty(n, np.int64)
     u = np.empty(n)
     width = np.empty(n, np.float32)
     flank = np.empty(n, np.float32)
     contrast = np.empty(n, np.float32)
     pad = np.empty(2 * half + 1, np.uint8)
+    p = 0
+    last_y, last_u = -1, 0.0
     for i in range(n):
         y = at[i] // w
         x = at[i] - y * w
@@ -64,16 +69,20 @@ def refine_peaks(s, bg, at, half):
                 pad[k] = s[y, min(max(x - half + k, 0), w - 1)]
             raw = pad
         peak, back = np.int64(raw[half]), np.int64(bg[y, x])
+        num, den, run = _run_moments(raw, half, back + peak)
+        ui = x + num / max(den, 1)
+        repeat = y == last_y and ui - last_u < 0.5
+        last_y, last_u = y, ui
+        if repeat:
+            continue
         left, right = peak, peak
         for k in range(1, half):
             left = min(left, np.int64(raw[k]))
             right = min(right, np.int64(raw[half + k]))
-        flank[i] = peak - max(left, right)
-        contrast[i] = peak - back
-        num, den, run = _run_moments(raw, half, back + peak)
-        u[i] = x + num / max(den, 1)
-        width[i] = run
-    return u, width, flank, contrast
+        x_out[p], y_out[p], u[p], width[p] = x, y + row0, ui, run
+        flank[p], contrast[p] = peak - max(left, right), peak - back
+        p += 1
+    return x_out[:p], y_out[:p], u[:p], width[:p], flank[:p], contrast[:p]
 
 
 @compiled
