@@ -169,7 +169,7 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
     points (N, 3) mm, stripe (N,) index, rows (N,) image row of each point.
     """
     out: dict = {"view": view, "point_count": int(len(points))}
-    ks, counts = np.unique(stripe, return_counts=True)
+    ks, counts = _stripe_counts(stripe)
     groups = [int(k) for k, n in zip(ks, counts, strict=True) if n >= params.min_group]
     out["stripes_detected"] = len(groups)
     out["body_height_mm"] = None
@@ -193,6 +193,16 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
         out["body_length"] = length
     out["oriented_box_mm"] = _box(points)
     return out
+
+
+def _stripe_counts(stripe: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """np.unique(stripe, return_counts=True) of stripe indices (N,), by one count per index when they are
+    small non-negative integers (as the pipeline's are)."""
+    if len(stripe) == 0 or stripe.dtype.kind not in "iu" or stripe.min() < 0 or stripe.max() > 1_000_000:
+        return np.unique(stripe, return_counts=True)
+    counts = np.bincount(stripe)
+    ks = np.flatnonzero(counts)
+    return ks.astype(stripe.dtype), counts[ks]
 
 
 def _length(points, stripe, rows, groups, min_rows) -> dict | None:
@@ -243,12 +253,13 @@ def _per_row(points: np.ndarray, rows: np.ndarray, shared: np.ndarray) -> np.nda
 
 def _box(points: np.ndarray) -> dict:
     c = points.mean(axis=0)
+    x = points - c
     # the SVD of the QR factor R: np.linalg.svd's own first step for a tall matrix (the same axes to the
     # bit), without forming the (N, 3) left singular vectors
-    _, _, vt = np.linalg.svd(np.linalg.qr(points - c, mode="r")) if len(points) >= 5 else \
-        np.linalg.svd(points - c, full_matrices=False)
-    t = (points - c) @ vt.T
-    lo, hi = np.quantile(t, [0.01, 0.99], axis=0)
+    _, _, vt = np.linalg.svd(np.linalg.qr(x, mode="r")) if len(points) >= 5 else \
+        np.linalg.svd(x, full_matrices=False)
+    # np.quantile(t, [0.01, 0.99], axis=0), a contiguous column at a time
+    lo, hi = np.array([_quantiles(col, (0.01, 0.99)) for col in (x @ vt.T).T.copy()]).T
     size = hi - lo
     return {"length_mm": round(float(size[0]), 2), "width_mm": round(float(size[2]), 2),
             "height_mm": round(float(size[1]), 2), "axes": vt.tolist(), "centre": c.tolist()}

@@ -198,3 +198,26 @@ def test_compiled_voxel_cells_equal_the_numpy_floor_of_the_offsets():
         shape = tuple(ijk.max(axis=0) + 1)
         flat, got_shape = _kernels.voxel_cells(pts, idx, 25.0)
         assert tuple(got_shape) == shape and np.array_equal(flat, np.ravel_multi_index(tuple(ijk.T), shape))
+
+
+def test_stripe_counts_are_np_unique_s():
+    from measurement.body import _stripe_counts
+
+    rng = np.random.default_rng(4)
+    for stripe in (rng.integers(0, 60, 5000), rng.integers(-3, 5, 50).astype(np.int32), np.zeros(0, np.int64),
+                   rng.integers(0, 9, 30).astype(np.float64)):
+        ks, counts = _stripe_counts(stripe)
+        want_ks, want_counts = np.unique(stripe, return_counts=True)
+        assert np.array_equal(ks, want_ks) and ks.dtype == want_ks.dtype and np.array_equal(counts, want_counts)
+
+
+def test_oriented_box_extents_are_np_quantile_s():
+    from measurement.body import _box
+
+    pts, _, _ = _barrel()
+    pts = pts + np.random.default_rng(2).normal(0, 3.0, pts.shape)
+    c = pts.mean(axis=0)
+    vt = np.linalg.svd(pts - c, full_matrices=False)[2]
+    lo, hi = np.quantile((pts - c) @ vt.T, [0.01, 0.99], axis=0)
+    box = _box(pts)
+    assert [box["length_mm"], box["height_mm"], box["width_mm"]] == [round(float(v), 2) for v in hi - lo]
