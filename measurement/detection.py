@@ -89,11 +89,24 @@ class Centres:
     def median_width(self) -> float:
         """np.median of ``width`` (pixels), taken once: the reliability test reads it in matching and again
         in the pipeline. (The arrays are not to be changed in place after it is read.)"""
-        return float(np.median(self.width))
+        return _median_width(self.width)
 
     def take(self, mask: np.ndarray) -> Centres:
         flank = None if self.flank is None else self.flank[mask]
         return Centres(self.u[mask], self.v[mask], self.contrast[mask], self.width[mask], flank)
+
+
+def _median_width(width: np.ndarray) -> float:
+    """np.median of widths (M,) float32: from their counts where they are small whole numbers (detection's
+    run lengths are), the mean of the two middle ones exactly as np.median forms it; else np.median."""
+    if width.dtype == np.float32 and len(width) and 0 <= width.min() and width.max() < 4096:
+        whole = width.astype(np.int32)
+        if (whole == width).all():
+            below = np.cumsum(np.bincount(whole))
+            n = len(width)
+            middle = np.searchsorted(below, [(n - 1) // 2, n // 2], side="right")
+            return float(middle.sum()) / 2
+    return float(np.median(width))
 
 
 def to_gray8(image: np.ndarray) -> np.ndarray:
