@@ -204,10 +204,8 @@ def noise_sigma(g: np.ndarray) -> float:
     h = g.shape[0]
     if h < 2:
         return 0.0
-    rows = np.arange(0, h - 1, 8)
-    d = g[rows + 1, ::4].astype(np.int16) - g[rows, ::4]
     # np.median of the integers 0..255 from their counts: the mean of the two middle ones, exactly
-    below = np.cumsum(np.bincount(np.abs(d).ravel(), minlength=256))
+    below = np.cumsum(_kernels.difference_counts(g, 8, 4))
     n = int(below[-1])
     middle = np.searchsorted(below, [(n - 1) // 2, n // 2], side="right")
     return float(middle.sum()) / 2 / (0.6745 * np.sqrt(2.0))

@@ -12,7 +12,7 @@ from __future__ import annotations
 from .background import group_counts, near_any_plane
 from .body import group_extents, voxel_cells
 from .cloud import cloud_points, rays_and_cells
-from .detection import first_peaks, refine_peaks
+from .detection import difference_counts, first_peaks, refine_peaks
 from .growth import (
     depth_votes,
     flag_beside,
@@ -56,4 +56,5 @@ __all__ = [
     "rays_and_cells",
     "cloud_points",
     "voxel_cells",
+    "difference_counts",
 ]

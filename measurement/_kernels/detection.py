@@ -102,3 +102,15 @@ def _run_moments(raw, half, level):
             den += h2
             run += 1
     return num, den, run
+
+
+@compiled
+def difference_counts(g, row_step, col_step):
+    """Counts (256,) int64 of |g[r + 1, c] - g[r, c]| over rows r = 0, row_step, ... < h - 1 and columns
+    c = 0, col_step, ... of the gray image g (h, w) uint8: ``detection.noise_sigma``'s sample."""
+    counts = np.zeros(256, np.int64)
+    h, w = g.shape
+    for r in range(0, h - 1, row_step):
+        for c in range(0, w, col_step):
+            counts[abs(np.int64(g[r + 1, c]) - np.int64(g[r, c]))] += 1
+    return counts
