@@ -52,11 +52,19 @@ def isolate(points: np.ndarray, background: np.ndarray | None, params: BodyParam
     largest cluster of points connected through occupied voxels of ``cluster_mm`` (26-neighbourhood)."""
     from scipy import ndimage
 
-    keep = np.isfinite(points[:, 0]) & np.isfinite(points[:, 1]) & np.isfinite(points[:, 2])
-    if background is not None and len(background):
-        d = np.abs(_plane_products(points, background[:, :3].T) - background[:, 3])
-        d = np.minimum.reduce(list(d.T)) if d.shape[1] > 1 else d[:, 0]  # faster than min(axis=1) over 2
-        keep &= d > background_margin(d[keep], params)
+    if background is not None and len(background) and points.dtype == background.dtype == np.float64:
+        # in one compiled pass: finite points, each point's least |n . p - d| over the planes and those
+        # near them (for the margin)
+        keep, d = np.empty(len(points), bool), np.empty(len(points))
+        near = _kernels.plane_distances(points, _plane_products(points, background[:, :3].T),
+                                        np.ascontiguousarray(background[:, 3]), params.background_mm, keep, d)
+        keep &= d > background_margin(near, params)
+    else:
+        keep = np.isfinite(points[:, 0]) & np.isfinite(points[:, 1]) & np.isfinite(points[:, 2])
+        if background is not None and len(background):
+            d = np.abs(_plane_products(points, background[:, :3].T) - background[:, 3])
+            d = np.minimum.reduce(list(d.T)) if d.shape[1] > 1 else d[:, 0]  # faster than min(axis=1) over 2
+            keep &= d > background_margin(d[keep], params)
     idx = np.nonzero(keep)[0]
     if len(idx) < params.min_group:
         return np.zeros(len(points), bool)

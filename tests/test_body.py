@@ -221,3 +221,23 @@ def test_oriented_box_extents_are_np_quantile_s():
     lo, hi = np.quantile((pts - c) @ vt.T, [0.01, 0.99], axis=0)
     box = _box(pts)
     assert [box["length_mm"], box["height_mm"], box["width_mm"]] == [round(float(v), 2) for v in hi - lo]
+
+
+def test_compiled_plane_distances_equal_the_numpy_minimum_of_the_planes():
+    from measurement import _kernels
+    from measurement.body import _plane_products
+
+    rng = np.random.default_rng(10)
+    for planes in (1, 2, 3):
+        pts = rng.normal(size=(5000, 3)) * 300 + [0, 100, 1400]
+        pts[::97, rng.integers(0, 3)] = np.nan
+        bg = np.column_stack([rng.normal(size=(planes, 3)), rng.uniform(-800, 800, planes)])
+        bg[:, :3] /= np.linalg.norm(bg[:, :3], axis=1, keepdims=True)
+        d = np.abs(_plane_products(pts, bg[:, :3].T) - bg[:, 3])
+        d = np.minimum.reduce(list(d.T)) if planes > 1 else d[:, 0]
+        finite = np.isfinite(pts).all(axis=1)
+        got_finite, got_d = np.empty(len(pts), bool), np.empty(len(pts))
+        near = _kernels.plane_distances(pts, _plane_products(pts, bg[:, :3].T), np.ascontiguousarray(bg[:, 3]),
+                                        150.0, got_finite, got_d)
+        assert np.array_equal(got_finite, finite) and np.array_equal(got_d, d, equal_nan=True)
+        assert np.array_equal(near, d[finite][d[finite] <= 150.0])

@@ -10,7 +10,7 @@ none is writable the kernels are compiled in memory on each start."""
 from __future__ import annotations
 
 from .background import group_counts, near_any_plane
-from .body import group_extents, voxel_cells
+from .body import group_extents, plane_distances, voxel_cells
 from .cloud import cloud_points, rays_and_cells
 from .detection import difference_counts, first_peaks, refine_peaks
 from .growth import (
@@ -57,4 +57,5 @@ __all__ = [
     "cloud_points",
     "voxel_cells",
     "difference_counts",
+    "plane_distances",
 ]

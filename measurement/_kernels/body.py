@@ -127,3 +127,25 @@ def voxel_cells(points, idx, voxel):
     for q in range(len(idx)):
         flat[q] = (ijk[q, 0] * shape[1] + ijk[q, 1]) * shape[2] + ijk[q, 2]
     return flat, shape
+
+
+@compiled
+def plane_distances(points, products, offsets, near_mm, finite, distance):
+    """Distance (N,) mm of each point of points (N, 3) to its nearest background plane into ``distance``,
+    from ``products`` (N, P) = points @ normals and the planes' ``offsets`` (P,): |product - offset|,
+    the least over the planes as np.minimum takes it (NaN wins); whether the point is finite into
+    ``finite`` (N,); returns the distances (K,) of the finite points within ``near_mm``, in order."""
+    near = np.empty(len(points))
+    k = 0
+    for i in range(len(points)):
+        finite[i] = np.isfinite(points[i, 0]) and np.isfinite(points[i, 1]) and np.isfinite(points[i, 2])
+        d = abs(products[i, 0] - offsets[0])
+        for p in range(1, len(offsets)):
+            e = abs(products[i, p] - offsets[p])
+            if d == d and (e != e or e < d):
+                d = e
+        distance[i] = d
+        if finite[i] and d <= near_mm:
+            near[k] = d
+            k += 1
+    return near[:k]
