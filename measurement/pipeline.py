@@ -84,13 +84,14 @@ def scan(image: np.ndarray, calibration: Calibration, view: str = "side", ambien
                 else "is this calibration for this rig and stripe count?")
         raise ScanError(f"no stripe could be matched to the calibration's {calibration.stripes} light planes "
                         f"(rows show about {n_found} stripes): {hint}")
-    pts = cloud_points(smooth_u, centres.u, centres.v, np.flatnonzero(ok), labels.stripe, cells, table,
-                       calibration.planes)
-    uv = np.column_stack([smooth_u[ok], centres.v[ok]])
-    stripe = labels.stripe[ok]
+    idx = np.flatnonzero(ok)
+    pts = cloud_points(smooth_u, centres.u, centres.v, idx, labels.stripe, cells, table, calibration.planes)
+    rows = centres.v.take(idx)
+    uv = np.column_stack([smooth_u.take(idx), rows])
+    stripe = labels.stripe.take(idx)
     t["triangulate"] = time.perf_counter()
     animal = isolate(pts, labels.background, params.body)
-    meas = measure(pts[animal], stripe[animal], centres.v[ok][animal], view, params.body)
+    meas = measure(pts[animal], stripe[animal], rows[animal], view, params.body)
     t["measure"] = time.perf_counter()
     stages = ["start", "detect", "denoise", "match", "triangulate", "measure"]
     timings = {s: round(1000 * (t[s] - t[p]), 2) for p, s in zip(stages, stages[1:], strict=False)}
