@@ -118,3 +118,13 @@ def test_band_centres_equal_the_opencv_and_numpy_form(small_capture, weak):
         got = det._band_centres(g, a, min(a + 100, g.shape[0]), params)
         want = _band_reference(g, a, min(a + 100, g.shape[0]), params)
         assert all(np.array_equal(p, q) and p.dtype == q.dtype for p, q in zip(got, want, strict=True))
+
+
+def test_sample_levels_are_those_of_the_strided_sample():
+    rng = np.random.default_rng(11)
+    for shape in ((1, 1), (5, 9), (37, 41), (64, 64)):
+        g = rng.integers(0, 256, shape).astype(np.uint8)
+        g[: shape[0] // 2] = np.maximum(g[: shape[0] // 2], 250)
+        sample = g[::4, ::4]
+        assert _kernels.sample_levels(g, 4, 250) == (int((sample >= 250).sum()), int(sample.min()),
+                                                     int(sample.max()), sample.size)

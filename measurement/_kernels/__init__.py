@@ -12,7 +12,7 @@ from __future__ import annotations
 from .background import group_counts, near_any_plane
 from .body import group_extents, plane_distances, voxel_cells
 from .cloud import cloud_points, rays_and_cells
-from .detection import difference_counts, first_peaks, refine_peaks
+from .detection import difference_counts, first_peaks, refine_peaks, sample_levels
 from .growth import (
     depth_votes,
     flag_beside,
@@ -58,4 +58,5 @@ __all__ = [
     "voxel_cells",
     "difference_counts",
     "plane_distances",
+    "sample_levels",
 ]

@@ -114,3 +114,19 @@ def difference_counts(g, row_step, col_step):
         for c in range(0, w, col_step):
             counts[abs(np.int64(g[r + 1, c]) - np.int64(g[r, c]))] += 1
     return counts
+
+
+@compiled
+def sample_levels(g, step, bright):
+    """Over g[::step, ::step] of the gray image g (h, w) uint8: how many pixels are at least ``bright``,
+    the least and the greatest level, and how many pixels there are (``detection.check_image``'s sample)."""
+    h, w = g.shape
+    count, lo, hi, n = 0, 255, 0, 0
+    for r in range(0, h, step):
+        for c in range(0, w, step):
+            x = np.int64(g[r, c])
+            count += x >= bright
+            lo = min(lo, x)
+            hi = max(hi, x)
+            n += 1
+    return count, lo, hi, n
