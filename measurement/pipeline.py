@@ -91,7 +91,8 @@ def scan(image: np.ndarray, calibration: Calibration, view: str = "side", ambien
     stripe = labels.stripe.take(idx)
     t["triangulate"] = time.perf_counter()
     animal = isolate(pts, labels.background, params.body)
-    meas = measure(pts[animal], stripe[animal], rows[animal], view, params.body)
+    animal_pts, animal_stripe = pts[animal], stripe[animal]
+    meas = measure(animal_pts, animal_stripe, rows[animal], view, params.body)
     t["measure"] = time.perf_counter()
     stages = ["start", "detect", "denoise", "match", "triangulate", "measure"]
     timings = {s: round(1000 * (t[s] - t[p]), 2) for p, s in zip(stages, stages[1:], strict=False)}
@@ -100,7 +101,7 @@ def scan(image: np.ndarray, calibration: Calibration, view: str = "side", ambien
     meas["scene_point_count"] = int(len(pts))
     meas["unplaced_share"] = round(labels.unplaced / labels.pieces, 4) if labels.pieces else 0.0
     meas["warnings"] = _warnings(meas, labels)
-    return ScanResult(pts[animal], stripe[animal], uv[animal], pts, stripe, uv, meas, timings)
+    return ScanResult(animal_pts, animal_stripe, uv[animal], pts, stripe, uv, meas, timings)
 
 
 def _warnings(meas: dict, labels: Labels) -> list[str]:
