@@ -8,6 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _kernels
+
 
 @dataclass(frozen=True)
 class BodyParams:
@@ -50,29 +52,73 @@ def isolate(points: np.ndarray, background: np.ndarray | None, params: BodyParam
     largest cluster of points connected through occupied voxels of ``cluster_mm`` (26-neighbourhood)."""
     from scipy import ndimage
 
-    keep = np.isfinite(points[:, 0]) & np.isfinite(points[:, 1]) & np.isfinite(points[:, 2])
-    if background is not None and len(background):
-        d = np.abs(points @ background[:, :3].T - background[:, 3])
-        d = np.minimum.reduce(list(d.T)) if d.shape[1] > 1 else d[:, 0]  # faster than min(axis=1) over 2
-        keep &= d > background_margin(d[keep], params)
+    if background is not None and len(background) and points.dtype == background.dtype == np.float64:
+        # in one compiled pass: finite points, each point's least |n . p - d| over the planes and those
+        # near them (for the margin)
+        keep, d = np.empty(len(points), bool), np.empty(len(points))
+        near = _kernels.plane_distances(points, _plane_products(points, background[:, :3].T),
+                                        np.ascontiguousarray(background[:, 3]), params.background_mm, keep, d)
+        keep &= d > background_margin(near, params)
+    else:
+        keep = np.isfinite(points[:, 0]) & np.isfinite(points[:, 1]) & np.isfinite(points[:, 2])
+        if background is not None and len(background):
+            d = np.abs(_plane_products(points, background[:, :3].T) - background[:, 3])
+            d = np.minimum.reduce(list(d.T)) if d.shape[1] > 1 else d[:, 0]  # faster than min(axis=1) over 2
+            keep &= d > background_margin(d[keep], params)
     idx = np.nonzero(keep)[0]
     if len(idx) < params.min_group:
         return np.zeros(len(points), bool)
-    voxel = params.cluster_mm
-    ijk = np.floor((points[idx] - points[idx].min(axis=0)) / voxel).astype(np.int64)
-    shape = tuple(ijk.max(axis=0) + 1)
+    cells, shape = _voxel_cells(points, idx, params.cluster_mm)
     if np.prod(shape) > 60_000_000:  # absurdly spread cloud: fall back to one cluster
         out = np.zeros(len(points), bool)
         out[idx] = True
         return out
-    grid = np.zeros(shape, bool)
-    grid[ijk[:, 0], ijk[:, 1], ijk[:, 2]] = True
-    labels, _ = ndimage.label(grid, structure=np.ones((3, 3, 3), bool))
-    lab = labels[ijk[:, 0], ijk[:, 1], ijk[:, 2]]
+    grid = np.zeros(int(np.prod(shape)), bool)
+    grid[cells] = True
+    labels, _ = ndimage.label(grid.reshape(shape), structure=np.ones((3, 3, 3), bool))
+    lab = labels.ravel()[cells]
     biggest = np.argmax(np.bincount(lab)[1:]) + 1
     out = np.zeros(len(points), bool)
     out[idx[lab == biggest]] = True
     return out
+
+
+def _voxel_cells(points: np.ndarray, idx: np.ndarray, voxel: float) -> tuple[np.ndarray, tuple[int, ...]]:
+    """Voxel (flat index (K,) into a C-ordered grid) of each point ``idx`` (K,) of points (N, 3) mm, cells of
+    ``voxel`` mm counted from the points' lowest corner, and the grid's shape (3 ints)."""
+    if points.dtype == np.float64 and points.ndim == 2 and points.shape[1] == 3:
+        flat, shape = _kernels.voxel_cells(points, idx, float(voxel))
+        return flat, tuple(int(n) for n in shape)
+    kept = points[idx]
+    ijk = np.floor((kept - kept.min(axis=0)) / voxel).astype(np.int64)
+    grid_shape = tuple(int(n) for n in ijk.max(axis=0) + 1)
+    return np.ravel_multi_index(tuple(ijk.T), grid_shape), grid_shape
+
+
+_PRODUCT_ROWS = 4096
+
+
+def _plane_products(points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """points (N, 3) @ normals (3, P), in blocks of rows: each block stays below OpenBLAS's threading
+    threshold (M N K < 262144), and the same kernel gives the same products (to the bit) while a threaded
+    product of the whole cloud sometimes waited ~40 ms for its second thread on a busy machine."""
+    out = np.empty((len(points), normals.shape[1]), np.result_type(points, normals))
+    for a in range(0, len(points), _PRODUCT_ROWS):
+        np.matmul(points[a:a + _PRODUCT_ROWS], normals, out=out[a:a + _PRODUCT_ROWS])
+    return out
+
+
+def _extents(points: np.ndarray, first: np.ndarray, last: np.ndarray, trim: float
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """``_extent`` of each group points[first[g]:last[g]] (G,) of points (N, 3) mm: extents (G,) mm and
+    extreme points (G, 2, 3) mm. Compiled, all groups in one call; NumPy where a point is not finite or a
+    pass keeps under 5 points."""
+    ends = np.zeros((len(first), 2, 3))
+    finite = bool(np.isfinite(points).all())
+    ext = _kernels.group_extents(points, first, last, trim, ends) if finite else np.full(len(first), np.nan)
+    for g in np.flatnonzero(np.isnan(ext)):
+        ext[g], ends[g] = _extent(points[first[g]:last[g]], trim)
+    return ext, ends
 
 
 def _extent(points: np.ndarray, trim: float) -> tuple[float, np.ndarray]:
@@ -131,7 +177,7 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
     points (N, 3) mm, stripe (N,) index, rows (N,) image row of each point.
     """
     out: dict = {"view": view, "point_count": int(len(points))}
-    ks, counts = np.unique(stripe, return_counts=True)
+    ks, counts = _stripe_counts(stripe)
     groups = [int(k) for k, n in zip(ks, counts, strict=True) if n >= params.min_group]
     out["stripes_detected"] = len(groups)
     out["body_height_mm"] = None
@@ -142,8 +188,9 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
     order = np.argsort(stripe, kind="stable")
     ks_sorted, ks_arr = stripe[order], np.array(groups)
     first, last = np.searchsorted(ks_sorted, ks_arr), np.searchsorted(ks_sorted, ks_arr, side="right")
-    extents = [(*_extent(points[order[a:b]], params.trim), k) for k, a, b in zip(groups, first, last, strict=True)]
-    ext, ends, k_best = max(extents, key=lambda e: e[0])
+    exts, all_ends = _extents(np.asarray(points[order], np.float64), first, last, params.trim)
+    best = max(range(len(groups)), key=lambda g: exts[g])  # the first of equals, as max() of the groups
+    ext, ends, k_best = float(exts[best]), all_ends[best], groups[best]
     name = "body_width" if view == "top" else "body_height"
     out["body_height_mm"] = round(ext, 2)
     out[name] = {"value_mm": round(ext, 2), "stripe": k_best, "points": ends.tolist()}
@@ -156,21 +203,29 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
     return out
 
 
+def _stripe_counts(stripe: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """np.unique(stripe, return_counts=True) of stripe indices (N,), by one count per index when they are
+    small non-negative integers (as the pipeline's are)."""
+    if len(stripe) == 0 or stripe.dtype.kind not in "iu" or stripe.min() < 0 or stripe.max() > 1_000_000:
+        return np.unique(stripe, return_counts=True)
+    counts = np.bincount(stripe)
+    ks = np.flatnonzero(counts)
+    return ks.astype(stripe.dtype), counts[ks]
+
+
 def _length(points, stripe, rows, groups, min_rows) -> dict | None:
     """Mean distance between the first and last stripe groups over the image rows both have; if they
     share fewer than ``min_rows`` rows, the outermost pair that does (largest index span, then most
     shared rows)."""
-    row_sets = {k: np.unique(rows[stripe == k]) for k in groups}
+    has, top = _row_table(stripe, rows, groups)
     for span in range(len(groups) - 1, 0, -1):
-        best = None
-        for a_i in range(len(groups) - span):
-            a, b = groups[a_i], groups[a_i + span]
-            shared = np.intersect1d(row_sets[a], row_sets[b], assume_unique=True)
-            if len(shared) >= min_rows and (best is None or len(shared) > len(best[2])):
-                best = (a, b, shared)
-        if best is None:
+        counts = np.count_nonzero(has[:-span] & has[span:], axis=1)  # shared rows of each pair this far apart
+        ok = np.flatnonzero(counts >= min_rows)
+        if len(ok) == 0:
             continue
-        a, b, shared = best
+        a_i = int(ok[np.argmax(counts[ok])])  # the first of the most
+        a, b = groups[a_i], groups[a_i + span]
+        shared = np.flatnonzero(has[a_i] & has[a_i + span]) + top
         ma, mb = stripe == a, stripe == b
         pa = _per_row(points[ma], rows[ma], shared)
         pb = _per_row(points[mb], rows[mb], shared)
@@ -185,6 +240,18 @@ def _length(points, stripe, rows, groups, min_rows) -> dict | None:
     return None
 
 
+def _row_table(stripe: np.ndarray, rows: np.ndarray, groups: list[int]) -> tuple[np.ndarray, int]:
+    """(G, R) bool: whether group g (stripe ``groups[g]``, ascending) has a point in image row top + r,
+    and top, the first row of any point."""
+    top = int(rows.min())
+    has = np.zeros((len(groups), int(rows.max()) - top + 1), bool)
+    ks = np.array(groups)
+    g = np.minimum(np.searchsorted(ks, stripe), len(ks) - 1)
+    mine = ks[g] == stripe
+    has[g[mine], rows[mine] - top] = True
+    return has, top
+
+
 def _per_row(points: np.ndarray, rows: np.ndarray, shared: np.ndarray) -> np.ndarray:
     order = np.argsort(rows, kind="stable")
     r, p = rows[order], points[order]
@@ -194,9 +261,13 @@ def _per_row(points: np.ndarray, rows: np.ndarray, shared: np.ndarray) -> np.nda
 
 def _box(points: np.ndarray) -> dict:
     c = points.mean(axis=0)
-    _, _, vt = np.linalg.svd(points - c, full_matrices=False)
-    t = (points - c) @ vt.T
-    lo, hi = np.quantile(t, [0.01, 0.99], axis=0)
+    x = points - c
+    # the SVD of the QR factor R: np.linalg.svd's own first step for a tall matrix (the same axes to the
+    # bit), without forming the (N, 3) left singular vectors
+    _, _, vt = np.linalg.svd(np.linalg.qr(x, mode="r")) if len(points) >= 5 else \
+        np.linalg.svd(x, full_matrices=False)
+    # np.quantile(t, [0.01, 0.99], axis=0), a contiguous column at a time
+    lo, hi = np.array([_quantiles(col, (0.01, 0.99)) for col in (x @ vt.T).T.copy()]).T
     size = hi - lo
     return {"length_mm": round(float(size[0]), 2), "width_mm": round(float(size[2]), 2),
             "height_mm": round(float(size[1]), 2), "axes": vt.tolist(), "centre": c.tolist()}

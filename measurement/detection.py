@@ -21,6 +21,7 @@ from functools import cached_property
 import cv2
 import numpy as np
 
+from . import _kernels
 from .errors import ImageError, StripeDetectionError
 
 
@@ -88,11 +89,24 @@ class Centres:
     def median_width(self) -> float:
         """np.median of ``width`` (pixels), taken once: the reliability test reads it in matching and again
         in the pipeline. (The arrays are not to be changed in place after it is read.)"""
-        return float(np.median(self.width))
+        return _median_width(self.width)
 
     def take(self, mask: np.ndarray) -> Centres:
         flank = None if self.flank is None else self.flank[mask]
         return Centres(self.u[mask], self.v[mask], self.contrast[mask], self.width[mask], flank)
+
+
+def _median_width(width: np.ndarray) -> float:
+    """np.median of widths (M,) float32: from their counts where they are small whole numbers (detection's
+    run lengths are), the mean of the two middle ones exactly as np.median forms it; else np.median."""
+    if width.dtype == np.float32 and len(width) and 0 <= width.min() and width.max() < 4096:
+        whole = width.astype(np.int32)
+        if (whole == width).all():
+            below = np.cumsum(np.bincount(whole))
+            n = len(width)
+            middle = np.searchsorted(below, [(n - 1) // 2, n // 2], side="right")
+            return float(middle.sum()) / 2
+    return float(np.median(width))
 
 
 def to_gray8(image: np.ndarray) -> np.ndarray:
@@ -134,12 +148,9 @@ def detect_centres(image: np.ndarray, params: DetectionParams = DetectionParams(
     # so the filters' images stay in cache, and the bands share the cores (OpenCV and NumPy release the
     # GIL): the same centres to the bit
     h, w = g.shape
+    # (the flat top of a wide stripe is a run of equal gray levels that a one-level dip can cut in two:
+    # both halves pass the non-maximum suppression and refine to the same centroid; the bands keep one)
     x, y, u, contrast, width, flank = _all_bands(g, params)
-    # the flat top of a wide stripe is a run of equal gray levels that a one-level dip can cut in two: both
-    # halves pass the non-maximum suppression and refine to the same centroid. One centre per peak
-    one = np.r_[True, (y[1:] != y[:-1]) | (u[1:] - u[:-1] >= 0.5)]
-    if not one.all():
-        x, y, u, contrast, width, flank = (z[one] for z in (x, y, u, contrast, width, flank))
     c = Centres(u, y.astype(np.int32), contrast, width, flank)
     if params.weak_contrast <= 0 or params.weak_contrast >= params.min_contrast:
         return c
@@ -193,10 +204,8 @@ def noise_sigma(g: np.ndarray) -> float:
     h = g.shape[0]
     if h < 2:
         return 0.0
-    rows = np.arange(0, h - 1, 8)
-    d = g[rows + 1, ::4].astype(np.int16) - g[rows, ::4]
     # np.median of the integers 0..255 from their counts: the mean of the two middle ones, exactly
-    below = np.cumsum(np.bincount(np.abs(d).ravel(), minlength=256))
+    below = np.cumsum(_kernels.difference_counts(g, 8, 4))
     n = int(below[-1])
     middle = np.searchsorted(below, [(n - 1) // 2, n // 2], side="right")
     return float(middle.sum()) / 2 / (0.6745 * np.sqrt(2.0))
@@ -204,8 +213,8 @@ def noise_sigma(g: np.ndarray) -> float:
 
 def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Candidate centres of rows a..b-1 of the gray image g (H, W) uint8: x, y (int64 pixels), u, contrast,
-    width and flank (see Centres), in raster order."""
+    """Candidate centres of rows a..b-1 of the gray image g (H, W) uint8, one per peak: x, y (int64 pixels),
+    u, contrast, width and flank (see Centres), in raster order."""
     h, w = g.shape
     sigma_y = params.sigma_y * max(w / 3072.0, 0.5)
     margin = int(4 * sigma_y) + 2  # beyond the blur's reach (OpenCV's 8-bit kernel: radius ~3 sigma)
@@ -215,22 +224,17 @@ def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams
     bg = cv2.erode(s, np.ones((1, _scaled(params.background_px, w, odd=True)), np.uint8))
     contrast = cv2.subtract(s, bg)
     peak = cv2.dilate(s, np.ones((1, 2 * _scaled(params.peak_px, w) + 1), np.uint8))
-    cand = cv2.compare(s, peak, cv2.CMP_EQ)
     low = params.weak_contrast if params.weak_contrast > 0 else params.min_contrast
-    cand = cv2.bitwise_and(cand, cv2.compare(contrast, np.full_like(contrast, int(low)), cv2.CMP_GT))
-    # on a flat-topped peak keep only its first pixel: strictly brighter than the left neighbour
-    first = np.zeros_like(cand)
-    first[:, 1:] = cv2.compare(s[:, 1:], s[:, :-1], cv2.CMP_GT)
-    # the peaks in raster order, as cv2.findNonZero lists them: NumPy finds them in a 0/1 mask viewed as
-    # bool several times faster
-    at = np.flatnonzero(np.bitwise_and(cv2.bitwise_and(cand, first), 1).view(bool))
-    if len(at) == 0:
-        none = np.zeros(0, np.float32)
-        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), none, none, none
-    y = at // w
-    x = at - y * w
-    u, width, flank = _refine(s, bg, x, y, _scaled(params.background_px, w) // 2 + 1)
-    return x, y + a, u, contrast[y, x].astype(np.float32), width, flank
+    # 0/1: as bright as every pixel within peak_px columns, and more than low above the background
+    strong = cv2.threshold(contrast, int(low), 1, cv2.THRESH_BINARY)[1]
+    cand = cv2.bitwise_and(cv2.compare(s, peak, cv2.CMP_EQ), strong)
+    # on a flat-topped peak keep only its first pixel (strictly brighter than the left neighbour); then
+    # the centroids, widths and flanks of the peaks in one compiled pass, one centre per peak (the NumPy
+    # form they replaced is in tests/test_detection_kernels.py)
+    at = _kernels.first_peaks(cand, s)
+    half = _scaled(params.background_px, w) // 2 + 1
+    x, y, u, width, flank, contrast_at = _kernels.refine_peaks(s, bg, at, half, a)
+    return x, y, u, contrast_at, width, flank
 
 
 def _linked(x: np.ndarray, y: np.ndarray, w: int, strong: np.ndarray, weak: np.ndarray, link: float
@@ -280,31 +284,6 @@ def reliable(c: Centres, params: DetectionParams = DetectionParams()) -> np.ndar
     return ok
 
 
-def _refine(s: np.ndarray, bg: np.ndarray, x: np.ndarray, y: np.ndarray, half: int
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Centroid of the part of each peak above half its height, within +-half pixels; that part's width;
-    and the peak's height above the higher of its two side minima (within half - 1 pixels each side)."""
-    n = 2 * half + 1
-    # (n, M) window of each peak, the row's end pixel repeated past the border
-    pad = cv2.copyMakeBorder(s, 0, 0, half, half, cv2.BORDER_REPLICATE)
-    raw = np.ascontiguousarray(np.lib.stride_tricks.sliding_window_view(pad, n, axis=1)[y, x].T)
-    # each side window holds the peak itself, so the difference cannot wrap around in uint8
-    flank = raw[half] - np.maximum(raw[1:half + 1].min(axis=0), raw[half:2 * half].min(axis=0))
-    # twice each pixel's height above the level (half way from the background to the peak): integers,
-    # so the centroid below is the exact ratio whatever the order of summation
-    h2 = raw.astype(np.int16) * 2 - (bg[y, x].astype(np.int16) + raw[half])
-    # keep only the contiguous run through the peak (a neighbouring stripe must not pull the centroid);
-    run = h2 > 0
-    for k in range(1, half + 1):
-        run[half + k] &= run[half + k - 1]
-        run[half - k] &= run[half - k + 1]
-    wts = h2 * run
-    offs = np.arange(-half, half + 1, dtype=np.int16)
-    u = x + (wts * offs[:, None]).sum(axis=0, dtype=np.int32) / np.maximum(wts.sum(axis=0, dtype=np.int32), 1)
-    width = run.sum(axis=0)
-    return u.astype(np.float64), width.astype(np.float32), flank.astype(np.float32)
-
-
 def check_image(image: np.ndarray, expected: tuple[int, int] | None, name: str = "image") -> None:
     """Refuse blank, saturated or wrong-size images with a message a technician can act on."""
     if image.ndim not in (2, 3) or image.size == 0:
@@ -312,12 +291,12 @@ def check_image(image: np.ndarray, expected: tuple[int, int] | None, name: str =
     h, w = image.shape[:2]
     if expected is not None and (w, h) != tuple(expected):
         raise ImageError(f"{name}: image is {w}x{h} but the calibration is for {expected[0]}x{expected[1]}")
-    g = to_gray8(image)
-    sample = g[::4, ::4]
-    if float((sample >= 250).mean()) > 0.5:
+    # every 4th pixel of every 4th row: how many are saturated, the darkest and the brightest
+    bright, lo, hi, n = _kernels.sample_levels(to_gray8(image), 4, 250)
+    if bright / n > 0.5:
         raise StripeDetectionError(f"{name}: more than half of the image is saturated: reduce exposure or "
                                    "projector brightness")
-    if int(sample.max()) - int(sample.min()) < 10:
+    if hi - lo < 10:
         raise StripeDetectionError(f"{name}: the image is blank (no contrast): no stripes to measure")
 
 

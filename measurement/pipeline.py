@@ -18,7 +18,7 @@ from .detection import DetectionParams, check_image, detect_centres, reliable
 from .errors import ScanError
 from .matching import Labels, MatchingParams, denoise, label_centres, smooth_along_segments
 from .threads import one_blas_thread
-from .triangulation import intersect, ray_table, rays_at
+from .triangulation import cloud_points, ray_table, rays_and_cells
 
 VIEWS = ("side", "top", "front", "back")
 
@@ -76,7 +76,8 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     if len(centres) and params.matching.denoise:
         centres = centres.take(denoise(centres, image.shape[:2]))
     t["denoise"] = time.perf_counter()
-    rays = rays_at(centres.u, centres.v, ray_table(calibration.intrinsics))
+    table = ray_table(calibration.intrinsics)
+    rays, cells = rays_and_cells(centres.u, centres.v, table)
     labels = label_centres(centres, rays, calibration.planes, image.shape[:2], params.matching)
     t["match"] = time.perf_counter()
     seg_ids = labels.segment if labels.segment is not None else np.arange(len(centres))
@@ -91,13 +92,15 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
                 else "is this calibration for this rig and stripe count?")
         raise ScanError(f"no stripe could be matched to the calibration's {calibration.stripes} light planes "
                         f"(rows show about {n_found} stripes): {hint}")
-    rays_s = rays_at(smooth_u[ok], centres.v[ok], ray_table(calibration.intrinsics))
-    pts = intersect(rays_s, calibration.planes.take(labels.stripe[ok], axis=0))
-    uv = np.column_stack([smooth_u[ok], centres.v[ok]])
-    stripe = labels.stripe[ok]
+    idx = np.flatnonzero(ok)
+    pts = cloud_points(smooth_u, centres.u, centres.v, idx, labels.stripe, cells, table, calibration.planes)
+    rows = centres.v.take(idx)
+    uv = np.column_stack([smooth_u.take(idx), rows])
+    stripe = labels.stripe.take(idx)
     t["triangulate"] = time.perf_counter()
     animal = isolate(pts, labels.background, params.body)
-    meas = measure(pts[animal], stripe[animal], centres.v[ok][animal], view, params.body)
+    animal_pts, animal_stripe = pts[animal], stripe[animal]
+    meas = measure(animal_pts, animal_stripe, rows[animal], view, params.body)
     t["measure"] = time.perf_counter()
     stages = ["start", "detect", "denoise", "match", "triangulate", "measure"]
     timings = {s: round(1000 * (t[s] - t[p]), 2) for p, s in zip(stages, stages[1:], strict=False)}
@@ -106,7 +109,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     meas["scene_point_count"] = int(len(pts))
     meas["unplaced_share"] = round(labels.unplaced / labels.pieces, 4) if labels.pieces else 0.0
     meas["warnings"] = _warnings(meas, labels)
-    return ScanResult(pts[animal], stripe[animal], uv[animal], pts, stripe, uv, meas, timings)
+    return ScanResult(animal_pts, animal_stripe, uv[animal], pts, stripe, uv, meas, timings)
 
 
 def _warnings(meas: dict, labels: Labels) -> list[str]:

@@ -36,6 +36,34 @@ def rays_at(u: np.ndarray, v: np.ndarray, table: np.ndarray) -> np.ndarray:
     return _rays_interpolated(u, v, table)
 
 
+def rays_and_cells(u: np.ndarray, v: np.ndarray, table: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """``rays_at(u, v, table)`` (M, 3), and the two table entries each ray interpolated between, (M, 2, 2)
+    float32 (None where the compiled pass does not apply), for ``cloud_points`` to read again: a frame's
+    ray lookups miss the cache once per centre, and most smoothed centres fall between the same entries."""
+    u = np.asarray(u)
+    if not (u.dtype == np.float64 and table.dtype == np.float32 and table.flags.c_contiguous):
+        return rays_at(u, v, table), None
+    cells = np.empty((len(u), 2, 2), np.float32)
+    rays = _kernels.rays_and_cells(u, np.asarray(v), table.reshape(-1, 2), table.shape[1], np.empty((len(u), 3)),
+                                   cells)
+    return rays, cells
+
+
+def cloud_points(u_new: np.ndarray, u: np.ndarray, v: np.ndarray, idx: np.ndarray, labels: np.ndarray,
+                 cells: np.ndarray | None, table: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """Points (K, 3) mm of the centres ``idx`` (K,) at new columns: ``intersect(rays_at(u_new[idx], v[idx],
+    table), planes[labels[idx]])`` to the bit, in one pass that reads the cells ``rays_and_cells(u, v,
+    table)`` kept instead of the table wherever it can.
+
+    u_new, u : (M,) float64 columns, pixels; v : (M,) rows; labels : (M,) plane index; planes : (N, 4)
+    """
+    idx = np.asarray(idx, np.int64)
+    if cells is None or u_new.dtype != np.float64 or planes.dtype != np.float64 or planes.shape[1:] != (4,):
+        return intersect(rays_at(u_new[idx], v[idx], table), planes.take(labels[idx], axis=0))
+    return _kernels.cloud_points(u_new, u, v, idx, labels, cells, table.reshape(-1, 2), table.shape[1], planes,
+                                 np.empty((len(idx), 3)))
+
+
 def _rays_interpolated(u: np.ndarray, v: np.ndarray, table: np.ndarray) -> np.ndarray:
     """``rays_at`` in numpy: the arithmetic the compiled kernel repeats."""
     w = table.shape[1]

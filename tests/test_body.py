@@ -84,3 +84,160 @@ def test_column_medians_equal_np_median_bit_for_bit():
     x = rng.normal(size=(9, 3))
     x[4, 1] = np.nan
     assert np.array_equal(_column_medians(x), np.median(x, axis=0), equal_nan=True)
+
+
+def _groups(seed: int, n_groups: int = 12):
+    """Stripe groups of a few to several hundred points along random directions, some with specks, some
+    with tied coordinates, in stripe order."""
+    rng = np.random.default_rng(seed)
+    pts, stripe = [], []
+    for k in range(n_groups):
+        n = int(rng.integers(5, 700))
+        g = rng.normal(size=(n, 3)) * rng.uniform(0.1, 100, 3)
+        g = g @ np.linalg.qr(rng.normal(size=(3, 3)))[0] + rng.normal(size=3) * 300
+        if k % 3 == 0:
+            g[:4] += rng.normal(size=(4, 3)) * 500
+        if k % 4 == 1:
+            g = g.round(0)
+        pts.append(g)
+        stripe.append(np.full(n, k))
+    return np.vstack(pts), np.concatenate(stripe)
+
+
+def test_compiled_extents_equal_the_numpy_extent_of_each_group():
+    from measurement.body import _extent, _extents
+
+    for seed in range(8):
+        pts, stripe = _groups(seed)
+        first = np.searchsorted(stripe, np.unique(stripe))
+        last = np.searchsorted(stripe, np.unique(stripe), side="right")
+        ext, ends = _extents(pts, first, last, 0.01)
+        for g, (a, b) in enumerate(zip(first, last, strict=True)):
+            want, want_ends = _extent(pts[a:b], 0.01)
+            assert abs(ext[g] - want) <= 1e-12 * abs(want)
+            assert np.allclose(ends[g], want_ends, rtol=1e-12, atol=1e-9)  # the same sign of the direction
+
+
+def test_extents_of_tiny_or_non_finite_groups_fall_back_to_numpy():
+    import pytest
+
+    from measurement.body import _extent, _extents
+
+    pts, _ = _groups(1, 2)
+    ext, ends = _extents(pts, np.array([0, 3]), np.array([3, 40]), 0.01)
+    for g, (a, b) in enumerate([(0, 3), (3, 40)]):
+        want, want_ends = _extent(pts[a:b], 0.01)
+        assert abs(ext[g] - want) <= 1e-12 * abs(want) and np.allclose(ends[g], want_ends, rtol=1e-12)
+    pts[7, 1] = np.nan  # as np.linalg.svd does, refused
+    with pytest.raises(np.linalg.LinAlgError):
+        _extents(pts, np.array([0, 3]), np.array([3, 40]), 0.01)
+
+
+def _length_reference(points, stripe, rows, groups, min_rows):
+    """The outermost pair of groups sharing at least min_rows image rows, by set intersections."""
+    row_sets = {k: np.unique(rows[stripe == k]) for k in groups}
+    for span in range(len(groups) - 1, 0, -1):
+        best = None
+        for a_i in range(len(groups) - span):
+            a, b = groups[a_i], groups[a_i + span]
+            shared = np.intersect1d(row_sets[a], row_sets[b], assume_unique=True)
+            if len(shared) >= min_rows and (best is None or len(shared) > len(best[2])):
+                best = (a, b, shared)
+        if best is not None:
+            return best[0], best[1], len(best[2])
+    return None
+
+
+def test_length_takes_the_pair_the_row_set_intersections_take():
+    from measurement.body import _length
+
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        pts, stripe, rows = _barrel(n_stripes=int(rng.integers(2, 15)), rows=40)
+        rows = rows + rng.integers(-25, 25, len(stripe)).clip(-10, 10) * (stripe % 3)  # shifted, with repeats
+        keep = rng.random(len(stripe)) > 0.3
+        pts, stripe, rows = pts[keep], stripe[keep], rows[keep] + 100
+        groups = [int(k) for k in np.unique(stripe)]
+        got, want = _length(pts, stripe, rows, groups, 10), _length_reference(pts, stripe, rows, groups, 10)
+        assert (got is None) == (want is None)
+        if got is not None:
+            assert (got["stripes"][0], got["stripes"][1], got["rows"]) == want
+
+
+def test_oriented_box_axes_are_np_linalg_svd_s_to_the_bit():
+    from measurement.body import _box
+
+    pts, _, _ = _barrel()
+    c = pts.mean(axis=0)
+    assert np.array_equal(np.array(_box(pts)["axes"]), np.linalg.svd(pts - c, full_matrices=False)[2])
+
+
+def test_plane_products_in_blocks_equal_one_matrix_product_to_the_bit():
+    from measurement.body import _plane_products
+
+    rng = np.random.default_rng(7)
+    for n in (1, 4095, 4096, 4097, 30_000, 87_565):
+        for planes in (1, 2, 3):
+            pts = rng.normal(size=(n, 3)) * 400 + [0, 100, 1500]
+            bg = rng.normal(size=(planes, 4))
+            assert np.array_equal(_plane_products(pts, bg[:, :3].T), pts @ bg[:, :3].T)
+
+
+def test_compiled_voxel_cells_equal_the_numpy_floor_of_the_offsets():
+    from measurement import _kernels
+
+    rng = np.random.default_rng(9)
+    for n in (1, 2, 50, 20_000):
+        pts = rng.normal(size=(n, 3)) * rng.uniform(1, 400, 3) + [0, 50, 1200]
+        pts[: n // 3] = pts[: n // 3].round(-1)  # on voxel borders too
+        idx = np.flatnonzero(rng.random(n) < 0.7) if n > 2 else np.arange(n)
+        if len(idx) == 0:
+            continue
+        kept = pts[idx]
+        ijk = np.floor((kept - kept.min(axis=0)) / 25.0).astype(np.int64)
+        shape = tuple(ijk.max(axis=0) + 1)
+        flat, got_shape = _kernels.voxel_cells(pts, idx, 25.0)
+        assert tuple(got_shape) == shape and np.array_equal(flat, np.ravel_multi_index(tuple(ijk.T), shape))
+
+
+def test_stripe_counts_are_np_unique_s():
+    from measurement.body import _stripe_counts
+
+    rng = np.random.default_rng(4)
+    for stripe in (rng.integers(0, 60, 5000), rng.integers(-3, 5, 50).astype(np.int32), np.zeros(0, np.int64),
+                   rng.integers(0, 9, 30).astype(np.float64)):
+        ks, counts = _stripe_counts(stripe)
+        want_ks, want_counts = np.unique(stripe, return_counts=True)
+        assert np.array_equal(ks, want_ks) and ks.dtype == want_ks.dtype and np.array_equal(counts, want_counts)
+
+
+def test_oriented_box_extents_are_np_quantile_s():
+    from measurement.body import _box
+
+    pts, _, _ = _barrel()
+    pts = pts + np.random.default_rng(2).normal(0, 3.0, pts.shape)
+    c = pts.mean(axis=0)
+    vt = np.linalg.svd(pts - c, full_matrices=False)[2]
+    lo, hi = np.quantile((pts - c) @ vt.T, [0.01, 0.99], axis=0)
+    box = _box(pts)
+    assert [box["length_mm"], box["height_mm"], box["width_mm"]] == [round(float(v), 2) for v in hi - lo]
+
+
+def test_compiled_plane_distances_equal_the_numpy_minimum_of_the_planes():
+    from measurement import _kernels
+    from measurement.body import _plane_products
+
+    rng = np.random.default_rng(10)
+    for planes in (1, 2, 3):
+        pts = rng.normal(size=(5000, 3)) * 300 + [0, 100, 1400]
+        pts[::97, rng.integers(0, 3)] = np.nan
+        bg = np.column_stack([rng.normal(size=(planes, 3)), rng.uniform(-800, 800, planes)])
+        bg[:, :3] /= np.linalg.norm(bg[:, :3], axis=1, keepdims=True)
+        d = np.abs(_plane_products(pts, bg[:, :3].T) - bg[:, 3])
+        d = np.minimum.reduce(list(d.T)) if planes > 1 else d[:, 0]
+        finite = np.isfinite(pts).all(axis=1)
+        got_finite, got_d = np.empty(len(pts), bool), np.empty(len(pts))
+        near = _kernels.plane_distances(pts, _plane_products(pts, bg[:, :3].T), np.ascontiguousarray(bg[:, 3]),
+                                        150.0, got_finite, got_d)
+        assert np.array_equal(got_finite, finite) and np.array_equal(got_d, d, equal_nan=True)
+        assert np.array_equal(near, d[finite][d[finite] <= 150.0])

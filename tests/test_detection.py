@@ -242,3 +242,14 @@ def test_the_median_width_is_np_median_of_the_widths_read_once():
         assert c.median_width == float(np.median(width))
         assert "median_width" in vars(c)  # cached: the reliability test and denoising read it again
         assert c.take(np.arange(n) % 2 == 0).median_width == float(np.median(width[::2]))
+
+
+def test_the_median_width_from_counts_is_np_median_s():
+    from measurement.detection import _median_width
+
+    rng = np.random.default_rng(6)
+    for width in (rng.integers(0, 20, 90_001), rng.integers(0, 20, 90_000), np.array([3]), np.array([3, 4]),
+                  rng.integers(0, 5000, 101), rng.uniform(0, 19, 1000), np.array([-1.0, 2.0, 5.0]),
+                  np.array([np.nan, 2.0, 3.0])):
+        width = width.astype(np.float32)
+        assert _median_width(width) == float(np.median(width)) or np.isnan(np.median(width))

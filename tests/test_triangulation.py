@@ -61,3 +61,24 @@ def test_rays_at_refuses_a_row_outside_the_ray_table():
     table = ray_table(_camera())
     with pytest.raises(IndexError):
         rays_at(np.array([10.0]), np.array([240]), table)
+
+
+def test_cloud_points_from_kept_cells_equal_rays_at_and_intersect_bit_for_bit():
+    from measurement.triangulation import cloud_points, rays_and_cells
+
+    table = ray_table(_camera())
+    rng = np.random.default_rng(8)
+    u = np.concatenate([rng.uniform(-3.0, 323.0, 5000), np.arange(-1.0, 321.0), [0.0, 318.999, 319.0, 319.5]])
+    v = rng.integers(0, 240, len(u)).astype(np.int32)
+    rays, cells = rays_and_cells(u, v, table)
+    assert cells is not None and rays.tobytes() == rays_at(u, v, table).tobytes()
+    # moved within the kept cells, into the next ones, far, past the borders
+    u_new = u + rng.choice([0.0, 0.3, -0.7, 1.2, -1.6, 2.5, -3.2, 40.0], len(u)) * rng.uniform(0.5, 1.0, len(u))
+    planes = np.column_stack([rng.normal(size=(7, 3)), rng.uniform(-500, 500, 7)])
+    planes[3, :3] = [1.0, 0.0, 0.0]  # rays nearly parallel: NaN
+    labels = rng.integers(0, 7, len(u))
+    idx = np.flatnonzero(rng.random(len(u)) < 0.8)
+    got = cloud_points(u_new, u, v, idx, labels, cells, table, planes)
+    want = intersect(rays_at(u_new[idx], v[idx], table), planes.take(labels[idx], axis=0))
+    assert got.tobytes() == want.tobytes()
+    assert cloud_points(u_new, u, v, idx, labels, None, table, planes).tobytes() == want.tobytes()

@@ -10,6 +10,9 @@ none is writable the kernels are compiled in memory on each start."""
 from __future__ import annotations
 
 from .background import group_counts, inlier_counts, near_any_plane
+from .body import group_extents, plane_distances, voxel_cells
+from .cloud import cloud_points, rays_and_cells
+from .detection import difference_counts, first_peaks, refine_peaks, sample_levels
 from .growth import (
     depth_votes,
     flag_beside,
@@ -31,19 +34,23 @@ from .segments import change_cuts, crowded, link_components, segment_row_order, 
 
 __all__ = [
     "change_cuts",
+    "cloud_points",
     "crowded",
     "depth_screen",
     "depth_votes",
+    "difference_counts",
     "distinct_cells",
+    "first_peaks",
     "flag_beside",
     "flag_touching",
     "gap_votes",
     "gapped_rows",
     "group_counts",
-    "inlier_counts",
+    "group_extents",
     "grow_by_depth",
     "grow_by_slope",
     "grow_piece",
+    "inlier_counts",
     "intersect",
     "link_components",
     "majority",
@@ -51,10 +58,15 @@ __all__ = [
     "neighbour_distances",
     "neighbour_pairs",
     "pair_groups",
+    "plane_distances",
+    "rays_and_cells",
     "rays_at",
+    "refine_peaks",
+    "sample_levels",
     "screened_bins",
     "segment_row_order",
     "segment_steps",
     "smooth_runs",
     "voting_pairs",
+    "voxel_cells",
 ]
