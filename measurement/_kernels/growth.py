@@ -375,7 +375,6 @@ def _voters(cols, table, newly, by_nb, by_own):
     in ``table``; -2 marks a segment that takes no part) and beside a segment in ``newly`` (G,), and whose
     neighbour is labelled."""
     nb_starts, nb_pairs = by_nb
-    own_starts, own_pairs = by_own
     seen = np.zeros(len(table), np.bool_)
     active = np.empty(len(table), np.int64)
     n_active = 0
@@ -387,22 +386,7 @@ def _voters(cols, table, newly, by_nb, by_own):
                 seen[a] = True
                 active[n_active] = a
                 n_active += 1
-    count = 0
-    for q in range(n_active):
-        a = active[q]
-        count += own_starts[a + 1] - own_starts[a]
-    out = np.empty(count, np.int64)
-    k = 0
-    for q in range(n_active):
-        a = active[q]
-        for j in range(own_starts[a], own_starts[a + 1]):
-            p = own_pairs[j]
-            if table[cols[4, p]] >= 0:
-                out[k] = p
-                k += 1
-    out = out[:k]
-    out.sort()
-    return out
+    return _pairs_of(cols, table, active[:n_active], by_own)
 
 
 @compiled
@@ -433,9 +417,11 @@ def gap_votes(rays, planes, table, cols, at, gaps, tol_mm, n):
 
 
 @compiled
-def _trial_voters(cols, table, trial, by_own):
-    """``voting_pairs(cols[3], cols[4], table, everyone, True)`` when only the segments ``trial`` (G,) are
-    labelled in ``table``: the positions (K,), ascending, of their pairs whose neighbour is labelled."""
+def _pairs_of(cols, table, segs, by_own):
+    """The positions (K,), ascending, of the pairs of the own segments ``segs`` (G,) (grouped in ``by_own``)
+    whose neighbour is labelled in ``table``: ``voting_pairs(cols[3], cols[4], table, everyone, True)``
+    when only ``segs`` are labelled (a trial's re-vote), and the voters of ``_voters``' active segments."""
+    trial = segs
     own_starts, own_pairs = by_own
     count = 0
     for g in range(len(trial)):
@@ -483,7 +469,7 @@ def grow_piece(rays, planes, cols, by_nb, by_own, state, seed, mid, tol_mm, n, g
         newly = segs
     trial = out_seg[:m].copy()
     for _ in range(refine_rounds):
-        at = _trial_voters(cols, table, trial, by_own)
+        at = _pairs_of(cols, table, trial, by_own)
         if len(at) == 0:
             break
         best = depth_votes(rays, planes, table, cols, at, refine_gaps, tol_mm, n, penalty_mm, no_step)
