@@ -84,13 +84,20 @@ def grow_by_depth(rays, planes, table, cols, tol_mm, n, gaps, penalty_mm, min_sh
     beside one labelled the round before, until none joins; updates ``table`` (S,) and returns the
     segments (G,) and labels (G,) in the order they joined. The voting pairs of a round are found
     from the segments that joined in the last (``_voters``), not by a pass over all pairs."""
+    by_nb = _members(cols[4], len(table))
+    by_own = _members(cols[3], len(table))
+    return _grow_rounds(rays, planes, table, cols, by_nb, by_own, np.flatnonzero(table >= 0), tol_mm, n, gaps,
+                        penalty_mm, min_share, rounds)
+
+
+@compiled
+def _grow_rounds(rays, planes, table, cols, by_nb, by_own, newly, tol_mm, n, gaps, penalty_mm, min_share, rounds):
+    """``grow_by_depth``'s rounds with the pairs grouped (``pair_groups``), from the segments ``newly`` (G,)
+    labelled last; updates ``table`` and returns the segments and labels that joined, in that order."""
     out_seg = np.empty(len(table), np.int64)
     out_lab = np.empty(len(table), np.int64)
     m = 0
     no_step = np.zeros(0)
-    by_nb = _members(cols[4], len(table))
-    by_own = _members(cols[3], len(table))
-    newly = np.flatnonzero(table >= 0)
     for _ in range(rounds):
         # only segments beside a newly labelled one can vote differently from the round before
         at = _voters(cols, table, newly, by_nb, by_own)
@@ -100,10 +107,7 @@ def grow_by_depth(rays, planes, table, cols, tol_mm, n, gaps, penalty_mm, min_sh
         segs, labs = majority(cols[3][at], best, n, min_share)
         if len(segs) == 0:
             break
-        for g in range(len(segs)):
-            table[segs[g]] = labs[g]
-            out_seg[m], out_lab[m] = segs[g], labs[g]
-            m += 1
+        m = _join(table, segs, labs, out_seg, out_lab, m)
         newly = segs
     return out_seg[:m], out_lab[:m]
 
@@ -339,10 +343,7 @@ def grow_by_slope(rays, planes, table, cols, seg, left, right, tol_mm, n, gaps, 
         segs, labs = majority(cols[3][at], best, n, min_share)
         if len(segs) == 0:
             break
-        for g in range(len(segs)):
-            table[segs[g]] = labs[g]
-            out_seg[m], out_lab[m] = segs[g], labs[g]
-            m += 1
+        m = _join(table, segs, labs, out_seg, out_lab, m)
         joined = segs
         # the steps of the segments touching a new one (``flag_touching``), measured again
         touched[:] = False
@@ -449,25 +450,11 @@ def grow_piece(rays, planes, cols, by_nb, by_own, state, seed, mid, tol_mm, n, g
     trial's segments (G,) (the seed, then in the order they joined) and their labels (G,)."""
     table = state.copy()
     table[seed] = mid
-    out_seg = np.empty(len(table), np.int64)
-    m = 1
-    out_seg[0] = seed
+    joined, _ = _grow_rounds(rays, planes, table, cols, by_nb, by_own, np.array([seed]), tol_mm, n, gaps,
+                             penalty_mm, min_share, rounds)
     no_step = np.zeros(0)
-    newly = out_seg[:1].copy()
-    for _ in range(rounds):
-        at = _voters(cols, table, newly, by_nb, by_own)
-        if len(at) == 0:
-            break
-        best = depth_votes(rays, planes, table, cols, at, gaps, tol_mm, n, penalty_mm, no_step)
-        segs, labs = majority(cols[3][at], best, n, min_share)
-        if len(segs) == 0:
-            break
-        for g in range(len(segs)):
-            table[segs[g]] = labs[g]
-            out_seg[m] = segs[g]
-            m += 1
-        newly = segs
-    trial = out_seg[:m].copy()
+    trial = np.concatenate((np.array([seed]), joined))
+    m = len(trial)
     for _ in range(refine_rounds):
         at = _pairs_of(cols, table, trial, by_own)
         if len(at) == 0:
@@ -492,3 +479,14 @@ def pair_groups(cols, n_seg):
     """The pairs (``matching._Pairs`` rows ``cols``) grouped by neighbour segment and by own segment
     (``_members`` of cols[4] and cols[3]), for ``_voters``."""
     return _members(cols[4], n_seg), _members(cols[3], n_seg)
+
+
+@compiled
+def _join(table, segs, labs, out_seg, out_lab, m):
+    """Write a round's joins (segments ``segs``, labels ``labs``) into ``table`` and append them to
+    ``out_seg``/``out_lab`` after their first ``m`` entries; returns the new count."""
+    for g in range(len(segs)):
+        table[segs[g]] = labs[g]
+        out_seg[m], out_lab[m] = segs[g], labs[g]
+        m += 1
+    return m
