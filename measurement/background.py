@@ -126,11 +126,8 @@ def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, mi
 
 def _group_medians(x: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """np.median of each run of ``x`` (K,) in turn, the runs ``counts`` (G,) long (each at least 1): one
-    sort instead of a call per run."""
-    group = np.repeat(np.arange(len(counts)), counts)
-    s = x[np.lexsort((x, group))]
-    start = np.r_[0, np.cumsum(counts)[:-1]]
-    return (s[start + (counts - 1) // 2] + s[start + counts // 2]) / 2
+    compiled pass instead of a call per run."""
+    return _kernels.group_medians(np.ascontiguousarray(x, dtype=np.float64), counts.astype(np.int64))
 
 
 def _plane_distance(points: np.ndarray, bg_planes: np.ndarray) -> np.ndarray:
@@ -193,7 +190,7 @@ def split_foreground(c, seg, labels, on_bg, link, min_rows):
         long_seg[fg_idx] = np.bincount(fseg)[fseg] >= min_rows
     kept = np.nonzero(~fg & (labels >= 0))[0]
     # labels are whole-segment here (a segment table masked by segment length): any centre gives its label
-    sids, first = np.unique(new[kept], return_index=True)
+    sids, first = _kernels.first_of_each(new[kept], int(new.max()) + 1 if len(new) else 0)
     by_first = np.argsort(first)
     seg_label = dict(zip(sids[by_first].tolist(), labels[kept[first[by_first]]].tolist(), strict=True))
     return new, long_seg, seg_label

@@ -204,3 +204,11 @@ def test_gap_votes_pick_the_labels_the_numpy_gap_test_picks():
         best_k[better], best_d[better] = k[better], d[better]
     assert (best_k >= 0).sum() > 30
     assert np.array_equal(got, best_k)
+
+
+def test_first_of_each_is_np_unique_with_first_positions():
+    rng = np.random.default_rng(10)
+    values = rng.integers(0, 500, 8000)
+    ids, pos = _kernels.first_of_each(values, 600)
+    ref_ids, ref_pos = np.unique(values, return_index=True)
+    assert np.array_equal(ids, ref_ids) and np.array_equal(pos, ref_pos)

@@ -9,7 +9,7 @@ none is writable the kernels are compiled in memory on each start."""
 
 from __future__ import annotations
 
-from .background import group_counts, inlier_counts, near_any_plane
+from .background import first_of_each, group_counts, group_medians, inlier_counts, near_any_plane
 from .body import group_extents, plane_distances, voxel_cells
 from .cloud import cloud_points, rays_and_cells
 from .detection import difference_counts, first_peaks, refine_peaks, sample_levels
@@ -41,12 +41,14 @@ __all__ = [
     "difference_counts",
     "distinct_cells",
     "first_peaks",
+    "first_of_each",
     "flag_beside",
     "flag_touching",
     "gap_votes",
     "gapped_rows",
     "group_counts",
     "group_extents",
+    "group_medians",
     "grow_by_depth",
     "grow_by_slope",
     "grow_piece",

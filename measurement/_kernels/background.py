@@ -67,3 +67,38 @@ def inlier_counts(sample, normals, offsets, tol_mm):
             count += abs(sample[i, 0] * n0 + sample[i, 1] * n1 + sample[i, 2] * n2 - d) < tol_mm
         out[j] = count
     return out
+
+
+@compiled
+def group_medians(x, counts):
+    """np.median of each run of ``x`` (K,) in turn, the runs ``counts`` (G,) long (each at least 1): each run
+    sorted on its own (NaN last, as np.sort and np.lexsort put it), the middle two averaged."""
+    out = np.empty(len(counts))
+    a = 0
+    for g in range(len(counts)):
+        c = counts[g]
+        s = np.sort(x[a:a + c])
+        out[g] = (s[(c - 1) // 2] + s[c // 2]) / 2
+        a += c
+    return out
+
+
+@compiled
+def first_of_each(values, size):
+    """For ids ``values`` (K,) in [0, size): the ids present, ascending (G,), and the position (G,) of each
+    one's first occurrence (``np.unique(values, return_index=True)``)."""
+    first = np.full(size, -1, np.int64)
+    for i in range(len(values)):
+        if first[values[i]] < 0:
+            first[values[i]] = i
+    count = 0
+    for s in range(size):
+        count += first[s] >= 0
+    ids = np.empty(count, np.int64)
+    pos = np.empty(count, np.int64)
+    g = 0
+    for s in range(size):
+        if first[s] >= 0:
+            ids[g], pos[g] = s, first[s]
+            g += 1
+    return ids, pos
