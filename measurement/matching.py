@@ -224,9 +224,6 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     bg_labels = dict(seg_label)
     bg_cl = _labels_of(seg, seg_label, long_seg)
     table = BinTable(rays, planes)  # the pieces' elevation bins, shared by every conflict curve below
-    cand = np.flatnonzero(long_seg & (bg_cl < 0))  # the pieces come from these: their bins while they grow
-    if len(cand) <= PREFILL_MAX:
-        table.prefill(cand)
     bg_lit = lit_cells(rays, planes, bg_cl, np.flatnonzero(bg_cl >= 0))
     fg_labels, small, cl, lit, first, shallow = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol,
                                                    n, weighed, params.depth_range_mm, bg_planes, bg_lit,
@@ -518,9 +515,6 @@ def _labels_of(seg: np.ndarray, seg_label: dict[int, int], long_seg: np.ndarray)
     return out
 
 
-# at most this many centres get their elevation bins on the second core while the pieces grow (a scan whose
-# background was not found would compute them for the whole frame; a piece is thinned to 20000 anyway)
-PREFILL_MAX = 40_000
 _COMPILED_SLOPE = True  # slope growth in one compiled loop (False: the rounds below, the reference)
 
 

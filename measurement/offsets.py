@@ -9,14 +9,12 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from concurrent.futures import Future
 from functools import lru_cache
 
 import numpy as np
 
 from . import _kernels
 from .planes import pencil_axis
-from .threads import second_core
 from .triangulation import intersect
 
 _log = logging.getLogger(__name__)
@@ -74,19 +72,6 @@ class BinTable:
         self._data = np.empty((len(rays), len(planes)), np.int64)
         self._rows = 0
         self._slot = np.full(len(rays), -1, np.int64)  # each centre's row in _data, -1 before
-        self._pending: Future | None = None
-
-    def prefill(self, idx: np.ndarray) -> None:
-        """Compute the rows of the distinct centres ``idx`` (K,) on another thread (the kernels release the
-        interpreter), while the caller goes on; the first ``table``/``rows`` call waits for them. A scan
-        fills in the centres its pieces may come from while it grows the pieces."""
-        self._wait()
-        self._pending = second_core().submit(self._fill, idx)
-
-    def _wait(self) -> None:
-        if self._pending is not None:
-            pending, self._pending = self._pending, None
-            pending.result()
 
     def rows(self, idx: np.ndarray) -> np.ndarray:
         """(K, N) bins of the distinct centres ``idx`` (K,) on every plane."""
@@ -96,10 +81,6 @@ class BinTable:
     def table(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The rows computed so far (R, N) and the row (K,) of each of the distinct centres ``idx`` (K,)
         among them: a compact table (one (M, N) array indexed by centre would fault in most of its pages)."""
-        self._wait()
-        return self._fill(idx)
-
-    def _fill(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         new = idx[self._slot[idx] < 0]
         if len(new):
             r = self._rows

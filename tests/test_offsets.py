@@ -189,17 +189,3 @@ def test_a_minimum_that_pushes_the_piece_past_the_pattern_is_not_the_reading():
     beyond = {o: ((20 - o) * 0.03 if o < 20 else 0.0, 0.0) for o in conflicts}
     assert choose_offset(conflicts, beyond, behind=lambda off: 0.01 if off >= 28 else 0.0) == 27
 
-
-def test_bins_prefilled_on_another_thread_are_the_bins_computed_on_demand():
-    from measurement.offsets import BinTable
-
-    planes = default_rig((1536, 1024), 40).projector.planes_cam()
-    rng = np.random.default_rng(9)
-    rays = np.column_stack([rng.uniform(-0.4, 0.4, 5000), rng.uniform(-0.3, 0.3, 5000), np.ones(5000)])
-    ask = rng.choice(5000, 700, replace=False)
-    on_demand = BinTable(rays, planes).rows(ask)
-    table = BinTable(rays, planes)
-    table.prefill(np.arange(0, 5000, 2))  # half of them, the others computed when asked
-    assert np.array_equal(table.rows(ask), on_demand)
-    table.prefill(np.arange(5000))  # a second prefill waits for the first
-    assert np.array_equal(table.rows(ask), on_demand)
