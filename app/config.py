@@ -32,6 +32,9 @@ class Settings(BaseSettings):
     snap_max_mm: float = Field(default=25.0, gt=0, description="farthest a pick may lie from the scan surface")
     path_step_mm: float = Field(default=2.0, gt=0, description="resampling step of picked polylines")
     log_level: str = Field(default="INFO")
+    warm_up: bool = Field(default=True, description="a starting worker compiles the scan kernels at once "
+                                                     "(about 40 s once, then 2-3 s from numba's cache), not "
+                                                     "during the first scan job")
 
     @property
     def db_url(self) -> str:

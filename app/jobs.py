@@ -176,6 +176,8 @@ def run_worker(settings: Settings, stop: threading.Event | None = None) -> None:
     upgrade(engine)
     me, stop = worker_id(), stop or threading.Event()
     _install_stop_signals()
+    if settings.warm_up:
+        threading.Thread(target=_warm_up, name="warm-up", daemon=True).start()
     log.info("worker %s polling %s", me, engine.url.render_as_string(hide_password=True))
     last_reap = 0.0
     job = None
@@ -198,6 +200,17 @@ def run_worker(settings: Settings, stop: threading.Event | None = None) -> None:
             release_job(engine, job.id, me)
     finally:
         engine.dispose()
+
+
+def _warm_up() -> None:
+    """Compile (or load) the scan kernels while the worker already polls; a job that comes meanwhile
+    waits for the kernels it needs, no longer than it would have anyway."""
+    from measurement.warmup import warm_up
+
+    try:
+        log.info("scan kernels ready in %.1f s", warm_up())
+    except Exception:  # a failed warm-up costs only the first scan's compile time
+        log.exception("warming up the scan kernels failed; the first scan compiles them")
 
 
 def _install_stop_signals() -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +11,10 @@ import pytest
 
 # the database fixtures (db_url on SQLite and PostgreSQL, a migrated engine) live with the backend helpers
 pytest_plugins = ("tests.backend_support",)
+
+# workers started by the tests (and the servers they spawn) skip compiling the scan kernels at start:
+# every test would pay a small scan for it; tests/test_warmup.py runs the warm-up itself
+os.environ.setdefault("BODYSCAN_WARM_UP", "0")
 
 SMALL = (1024, 683)
 
