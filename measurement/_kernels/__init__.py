@@ -1,11 +1,13 @@
-"""Compiled loops (numba) for the hot spots of stripe matching, each the exact loop form of a NumPy
-function it replaces: the same floating-point operations in the same order (np.einsum sums three
-products as (x + z) + y), or a screened formula that leaves to the exact NumPy one every case rounding
-could decide, so the labels come out to the bit.
+"""Compiled loops (numba) for the hot spots of a scan (detection, matching, triangulation, measurement),
+each the exact loop form of a NumPy function it replaces: the same floating-point operations in the same
+order (np.einsum sums three products as (x + z) + y), or a screened formula that leaves to the exact NumPy
+one every case rounding could decide, so the labels come out to the bit. One exception says so in its
+docstring: RANSAC's inlier count (``inlier_counts``) sums its dot products in its own order.
 
-numba compiles a kernel on its first call (about twenty seconds for all of them) and caches the machine code
-in ``__pycache__`` beside this file, else in ``NUMBA_CACHE_DIR`` or the user's cache directory; where
-none is writable the kernels are compiled in memory on each start."""
+numba compiles a kernel on its first call (about forty seconds for all of them on a 2-core machine; a job
+worker does it when it starts, ``measurement.warmup``) and caches the machine code in ``__pycache__``
+beside this file, else in ``NUMBA_CACHE_DIR`` or the user's cache directory; where none is writable the
+kernels are compiled in memory on each start."""
 
 from __future__ import annotations
 
