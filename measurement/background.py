@@ -85,7 +85,7 @@ def _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm):
     member = np.zeros(seg.max() + 1, bool)
     member[sids] = True
     idx = np.nonzero(member[seg])[0]
-    idx = idx[np.argsort(seg[idx], kind="stable")]
+    idx = idx[_kernels.stable_group_order(seg[idx], len(member))]
     starts = np.searchsorted(seg[idx], sids)
     near = _near_any_plane(rays.take(idx, axis=0), planes, bg_planes, tol_mm)
     bounds = np.r_[starts, len(idx)]

@@ -212,3 +212,9 @@ def test_first_of_each_is_np_unique_with_first_positions():
     ids, pos = _kernels.first_of_each(values, 600)
     ref_ids, ref_pos = np.unique(values, return_index=True)
     assert np.array_equal(ids, ref_ids) and np.array_equal(pos, ref_pos)
+
+
+def test_stable_group_order_is_a_stable_argsort():
+    rng = np.random.default_rng(11)
+    keys = rng.integers(0, 250, 30000)
+    assert np.array_equal(_kernels.stable_group_order(keys, 260), np.argsort(keys, kind="stable"))

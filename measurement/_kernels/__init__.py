@@ -28,6 +28,7 @@ from .growth import (
     neighbour_pairs,
     pair_groups,
     segment_steps,
+    stable_group_order,
     voting_pairs,
 )
 from .offsets import distinct_cells, screened_bins
@@ -71,6 +72,7 @@ __all__ = [
     "segment_row_order",
     "segment_steps",
     "smooth_runs",
+    "stable_group_order",
     "voting_pairs",
     "voxel_cells",
 ]

@@ -490,3 +490,9 @@ def _join(table, segs, labs, out_seg, out_lab, m):
         out_seg[m], out_lab[m] = segs[g], labs[g]
         m += 1
     return m
+
+
+@compiled
+def stable_group_order(keys, n_keys):
+    """``np.argsort(keys, kind="stable")`` for integer keys (K,) in [0, ``n_keys``): a counting sort."""
+    return _members(keys, n_keys)[1]
