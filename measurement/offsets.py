@@ -15,7 +15,7 @@ import numpy as np
 
 from . import _kernels
 from .planes import pencil_axis
-from .triangulation import intersect
+from .triangulation import intersect, kernel_layout
 
 _log = logging.getLogger(__name__)
 
@@ -220,7 +220,14 @@ def lit_cells(rays, planes, labels, which, bins: float = 0.002) -> np.ndarray:
         return np.zeros(0, np.int64)
     k = labels[which]
     ray = rays.take(which, axis=0)
-    e = elevation_bins(intersect(ray, planes.take(k, axis=0), out=ray), planes, bins)
+    if kernel_layout(ray, planes):  # screened ray by ray, the exact formula where it could differ
+        centre, a = _projector_frame(planes)
+        e = np.empty(len(which), np.int64)
+        unsure = _kernels.screened_bins_at(ray, planes, k, centre, a, bins, 1e-5, e)
+        if len(unsure):
+            e[unsure] = _exact_bins(ray.take(unsure, axis=0), planes.take(k[unsure], axis=0), planes, bins)
+    else:
+        e = elevation_bins(intersect(ray, planes.take(k, axis=0), out=ray), planes, bins)
     return _unique_cells(k, e, len(planes))
 
 

@@ -189,3 +189,16 @@ def test_a_minimum_that_pushes_the_piece_past_the_pattern_is_not_the_reading():
     beyond = {o: ((20 - o) * 0.03 if o < 20 else 0.0, 0.0) for o in conflicts}
     assert choose_offset(conflicts, beyond, behind=lambda off: 0.01 if off >= 28 else 0.0) == 27
 
+
+
+def test_lit_cells_screened_ray_by_ray_are_the_cells_of_the_exact_formula():
+    from measurement.offsets import _unique_cells, elevation_bins, lit_cells
+    from measurement.triangulation import intersect
+
+    planes = default_rig((1536, 1024), 40).projector.planes_cam()
+    rng = np.random.default_rng(12)
+    rays = np.column_stack([rng.uniform(-0.4, 0.4, 20000), rng.uniform(-0.3, 0.3, 20000), np.ones(20000)])
+    labels = rng.integers(0, 40, 20000)
+    which = np.flatnonzero(rng.random(20000) < 0.7)
+    exact = elevation_bins(intersect(rays[which], planes[labels[which]]), planes, 0.002)
+    assert np.array_equal(lit_cells(rays, planes, labels, which), _unique_cells(labels[which], exact, 40))

@@ -31,7 +31,7 @@ from .growth import (
     stable_group_order,
     voting_pairs,
 )
-from .offsets import distinct_cells, screened_bins
+from .offsets import distinct_cells, screened_bins, screened_bins_at
 from .rays import depth_screen, intersect, neighbour_distances, rays_at
 from .segments import change_cuts, crowded, link_components, segment_row_order, smooth_runs
 
@@ -69,6 +69,7 @@ __all__ = [
     "refine_peaks",
     "sample_levels",
     "screened_bins",
+    "screened_bins_at",
     "segment_row_order",
     "segment_steps",
     "smooth_runs",

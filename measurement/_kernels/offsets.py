@@ -101,3 +101,37 @@ def distinct_cells(rel, rows, sub, offsets, n, deep, most):
                     cells[w] += 1
                     hits[w] += in_deep[cell]
     return cells, hits, True
+
+
+@compiled
+def screened_bins_at(rays, planes, k, centre, axis, bins, margin, out):
+    """``screened_bins`` for one light plane per ray: into ``out`` (S,) int64 the elevation bin of ray i
+    (S, 3) on plane ``k[i]`` by the screened formula (the same operations in the same order), and returns
+    the rays (U,), ascending, where it is not sure, for the exact formula to decide."""
+    cc = centre[0] * centre[0] + centre[1] * centre[1] + centre[2] * centre[2]
+    ca = centre[0] * axis[0] + centre[1] * axis[1] + centre[2] * axis[2]
+    tau = margin / bins
+    unsure = np.empty(len(rays), np.int64)
+    m = 0
+    for i in range(len(rays)):
+        r0, r1, r2 = rays[i, 0], rays[i, 1], rays[i, 2]
+        rr = r0 * r0 + r1 * r1 + r2 * r2
+        ra = axis[0] * r0 + axis[1] * r1 + axis[2] * r2
+        rc = centre[0] * r0 + centre[1] * r1 + centre[2] * r2
+        rsize = 1e-3 * (abs(r0) + abs(r1) + abs(r2))
+        p0, p1, p2, d = planes[k[i], 0], planes[k[i], 1], planes[k[i], 2], planes[k[i], 3]
+        dot = p0 * r0 + p1 * r1 + p2 * r2
+        size = abs(dot)
+        s = d / dot
+        along = s * ra - ca
+        q2 = (s * rr - 2 * rc) * s + cc
+        across2 = q2 - along * along
+        f = along / (np.sqrt(across2) * bins)
+        fl = np.floor(f)
+        frac = f - fl
+        if (size > rsize) and (size > 1e-6) and (across2 > 1e-4 * (q2 + cc)) and (frac > tau) and (frac < 1 - tau):
+            out[i] = np.int64(fl)
+        else:
+            unsure[m] = i
+            m += 1
+    return unsure[:m]
