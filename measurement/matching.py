@@ -519,22 +519,20 @@ _COMPILED_SLOPE = True  # slope growth in one compiled loop (False: the rounds b
 
 
 def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, bg_planes=None,
-              depth_only=False, avoid_planes=None, gaps=(1, 2, 3), min_share=0.6, slope=False,
-              pairs: _Pairs | None = None, n_seg: int | None = None) -> None:
+              depth_only=False, gaps=(1, 2, 3), min_share=0.6, slope=False, pairs: _Pairs | None = None) -> None:
     """Grow labels along continuous surfaces until nothing changes (updates ``seg_label`` in place).
-    With ``bg_planes`` a segment only joins when its points then lie on those planes; with
-    ``avoid_planes`` only when they do not. With ``slope`` (depth only) the neighbour's depth is
+    With ``bg_planes`` a segment only joins when its points then lie on those planes. With ``slope`` (depth only) the neighbour's depth is
     extrapolated by its own step from the stripe beyond it, so a steep surface keeps growing.
-    ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``, when already known; ``n_seg`` : seg.max() + 1, if known."""
-    table = label_table(seg, seg_label, n_seg)
+    ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``, when already known."""
+    table = label_table(seg, seg_label)
     pairs = _neighbour_pairs(seg, long_seg, left, right) if pairs is None else pairs
-    if depth_only and not slope and bg_planes is None and avoid_planes is None:  # all rounds compiled
+    if depth_only and not slope and bg_planes is None:  # all rounds compiled
         # (the kernel passes over pairs whose own segment is labelled: no copy of the open ones)
         segs, labs = _kernels.grow_by_depth(rays, planes, table, pairs.cols, tol_mm, n, np.array(gaps, np.int64),
                                             GAP_PENALTY_MM, min_share, 40)
         seg_label.update(zip(segs.tolist(), labs.tolist(), strict=True))
         return
-    if depth_only and slope and bg_planes is None and avoid_planes is None and _COMPILED_SLOPE:
+    if depth_only and slope and bg_planes is None and _COMPILED_SLOPE:
         segs, labs = _kernels.grow_by_slope(rays, planes, table, pairs.cols, seg, left, right, tol_mm, n,
                                             np.array(gaps, np.int64), GAP_PENALTY_MM, min_share, 40, 3)
         seg_label.update(zip(segs.tolist(), labs.tolist(), strict=True))
@@ -554,9 +552,6 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
         if bg_planes is not None and new:
             on = segments_on_planes(rays, planes, seg, new, bg_planes)
             new = {s: k for s, k in new.items() if s in on}
-        if avoid_planes is not None and new:
-            on = segments_on_planes(rays, planes, seg, new, avoid_planes, share=0.5)
-            new = {s: k for s, k in new.items() if s not in on}
         if not new:
             break
         seg_label.update(new)

@@ -106,10 +106,9 @@ def smooth_along_segments(c: Centres, segment: np.ndarray, labels: np.ndarray, h
     return u, keep
 
 
-def label_table(seg: np.ndarray, seg_label: dict[int, int], size: int | None = None) -> np.ndarray:
-    """Label (S,) of every segment id up to seg.max(), -1 where ``seg_label`` (segment -> label) has none.
-    size : seg.max() + 1, when the caller knows it (a pass over the centres less)"""
-    table = np.full(seg.max() + 1 if size is None else size, -1, np.int64)
+def label_table(seg: np.ndarray, seg_label: dict[int, int]) -> np.ndarray:
+    """Label (S,) of every segment id up to seg.max(), -1 where ``seg_label`` (segment -> label) has none."""
+    table = np.full(seg.max() + 1, -1, np.int64)
     if seg_label:
         table[np.fromiter(seg_label.keys(), np.int64)] = np.fromiter(seg_label.values(), np.int64)
     return table

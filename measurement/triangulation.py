@@ -31,9 +31,14 @@ def rays_at(u: np.ndarray, v: np.ndarray, table: np.ndarray) -> np.ndarray:
     """Rays (M, 3) with z = 1 through sub-pixel columns ``u`` (M,) of integer rows ``v`` (M,), by linear
     interpolation along the row of the ray table (rows are exact)."""
     u = np.asarray(u)
-    if u.dtype == np.float64 and table.dtype == np.float32 and table.flags.c_contiguous:  # one fused pass
+    if _table_layout(u, table):  # one fused pass
         return _kernels.rays_at(u, np.asarray(v), table.reshape(-1, 2), table.shape[1], np.empty((len(u), 3)))
     return _rays_interpolated(u, v, table)
+
+
+def _table_layout(u: np.ndarray, table: np.ndarray) -> bool:
+    """Whether the compiled lookups apply: float64 columns ``u`` and a C-contiguous float32 ray table."""
+    return u.dtype == np.float64 and table.dtype == np.float32 and table.flags.c_contiguous
 
 
 def rays_and_cells(u: np.ndarray, v: np.ndarray, table: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
@@ -41,7 +46,7 @@ def rays_and_cells(u: np.ndarray, v: np.ndarray, table: np.ndarray) -> tuple[np.
     float32 (None where the compiled pass does not apply), for ``cloud_points`` to read again: a frame's
     ray lookups miss the cache once per centre, and most smoothed centres fall between the same entries."""
     u = np.asarray(u)
-    if not (u.dtype == np.float64 and table.dtype == np.float32 and table.flags.c_contiguous):
+    if not _table_layout(u, table):
         return rays_at(u, v, table), None
     cells = np.empty((len(u), 2, 2), np.float32)
     rays = _kernels.rays_and_cells(u, np.asarray(v), table.reshape(-1, 2), table.shape[1], np.empty((len(u), 3)),

@@ -155,7 +155,7 @@ def test_segment_row_order_sorts_as_lexsort_does():
 
 
 def test_voters_from_grouped_pairs_are_the_voting_pairs_of_a_full_pass():
-    from measurement._kernels.growth import _members, _voters
+    from measurement._kernels.growth import _voters
 
     rng = np.random.default_rng(7)
     n_seg, n_pairs = 300, 5000
@@ -167,7 +167,7 @@ def test_voters_from_grouped_pairs_are_the_voting_pairs_of_a_full_pass():
     flags = np.zeros(n_seg, bool)
     flags[newly] = True
     full = _kernels.voting_pairs(cols[3], cols[4], table, _kernels.flag_beside(cols[3], cols[4], flags), False)
-    got = _voters(cols, table, newly, _members(cols[4], n_seg), _members(cols[3], n_seg))
+    got = _voters(cols, table, newly, *_kernels.pair_groups(cols, n_seg))
     assert len(full) > 50
     assert np.array_equal(got, full)
 

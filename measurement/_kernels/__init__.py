@@ -28,12 +28,18 @@ from .growth import (
     neighbour_pairs,
     pair_groups,
     segment_steps,
-    stable_group_order,
     voting_pairs,
 )
 from .offsets import distinct_cells, screened_bins, screened_bins_at
 from .rays import depth_screen, intersect, neighbour_distances, rays_at
-from .segments import change_cuts, crowded, link_components, segment_row_order, smooth_runs
+from .segments import (
+    change_cuts,
+    crowded,
+    link_components,
+    segment_row_order,
+    smooth_runs,
+    stable_group_order,
+)
 
 __all__ = [
     "change_cuts",

@@ -6,6 +6,7 @@ import numpy as np
 
 from .jit import compiled
 from .rays import _depth, _point
+from .segments import group_members
 
 
 @compiled
@@ -84,8 +85,8 @@ def grow_by_depth(rays, planes, table, cols, tol_mm, n, gaps, penalty_mm, min_sh
     beside one labelled the round before, until none joins; updates ``table`` (S,) and returns the
     segments (G,) and labels (G,) in the order they joined. The voting pairs of a round are found
     from the segments that joined in the last (``_voters``), not by a pass over all pairs."""
-    by_nb = _members(cols[4], len(table))
-    by_own = _members(cols[3], len(table))
+    by_nb = group_members(cols[4], len(table))
+    by_own = group_members(cols[3], len(table))
     return _grow_rounds(rays, planes, table, cols, by_nb, by_own, np.flatnonzero(table >= 0), tol_mm, n, gaps,
                         penalty_mm, min_share, rounds)
 
@@ -248,22 +249,6 @@ def _slope_step(rays, planes, table, cols, p, zn, tol_mm):
 
 
 @compiled
-def _members(seg, n_seg):
-    """The centres of each segment, ascending: group starts (S + 1,) and centres (M,) (a counting sort)."""
-    starts = np.zeros(n_seg + 1, np.int64)
-    for i in range(len(seg)):
-        starts[seg[i] + 1] += 1
-    for s in range(n_seg):
-        starts[s + 1] += starts[s]
-    fill = starts[:-1].copy()
-    members = np.empty(len(seg), np.int64)
-    for i in range(len(seg)):
-        members[fill[seg[i]]] = i
-        fill[seg[i]] += 1
-    return starts, members
-
-
-@compiled
 def _steps_of(s, starts, members, seg, rays, planes, table, nb, sign, tol_mm, min_rows):
     """``segment_steps``' value for the one segment ``s``, from its own centres (in index order)."""
     cnt = 0
@@ -294,13 +279,13 @@ def grow_by_slope(rays, planes, table, cols, seg, left, right, tol_mm, n, gaps, 
     joins. Updates ``table`` (S,) and returns the segments (G,) and labels (G,) in the order they joined."""
     n_seg = len(table)
     labelled = table >= 0
-    by_nb = _members(cols[4], n_seg)
-    by_own = _members(cols[3], n_seg)
+    by_nb = group_members(cols[4], n_seg)
+    by_own = group_members(cols[3], n_seg)
     joined = np.flatnonzero(labelled)
     out_seg = np.empty(n_seg, np.int64)
     out_lab = np.empty(n_seg, np.int64)
     m = 0
-    starts, members = _members(seg, n_seg)
+    starts, members = group_members(seg, n_seg)
     steps_l = segment_steps(seg, rays, planes, table, left, 1, labelled, tol_mm, min_rows)
     steps_r = segment_steps(seg, rays, planes, table, right, -1, labelled, tol_mm, min_rows)
     cnt = np.zeros(2 * n_seg, np.int64)
@@ -371,7 +356,7 @@ def grow_by_slope(rays, planes, table, cols, seg, left, right, tol_mm, n, gaps, 
 @compiled
 def _voters(cols, table, newly, by_nb, by_own):
     """``voting_pairs(cols[3], cols[4], table, flag_beside(cols[3], cols[4], flags of newly), False)`` from
-    the pairs grouped by neighbour segment ``by_nb`` and by own segment ``by_own`` (``_members`` of
+    the pairs grouped by neighbour segment ``by_nb`` and by own segment ``by_own`` (``group_members`` of
     cols[4] and cols[3]): the positions (K,), ascending, of the pairs whose own segment is unlabelled (-1
     in ``table``; -2 marks a segment that takes no part) and beside a segment in ``newly`` (G,), and whose
     neighbour is labelled."""
@@ -477,8 +462,8 @@ def grow_piece(rays, planes, cols, by_nb, by_own, state, seed, mid, tol_mm, n, g
 @compiled
 def pair_groups(cols, n_seg):
     """The pairs (``matching._Pairs`` rows ``cols``) grouped by neighbour segment and by own segment
-    (``_members`` of cols[4] and cols[3]), for ``_voters``."""
-    return _members(cols[4], n_seg), _members(cols[3], n_seg)
+    (``group_members`` of cols[4] and cols[3]), for ``_voters``."""
+    return group_members(cols[4], n_seg), group_members(cols[3], n_seg)
 
 
 @compiled
@@ -491,8 +476,3 @@ def _join(table, segs, labs, out_seg, out_lab, m):
         m += 1
     return m
 
-
-@compiled
-def stable_group_order(keys, n_keys):
-    """``np.argsort(keys, kind="stable")`` for integer keys (K,) in [0, ``n_keys``): a counting sort."""
-    return _members(keys, n_keys)[1]

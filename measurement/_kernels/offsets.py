@@ -22,10 +22,7 @@ def screened_bins(rays, planes, centre, axis, bins, margin, out):
     rr, ra, rc, rsize = np.empty(s_n), np.empty(s_n), np.empty(s_n), np.empty(s_n)
     for i in range(s_n):
         r0[i], r1[i], r2[i] = rays[i, 0], rays[i, 1], rays[i, 2]
-        rr[i] = r0[i] * r0[i] + r1[i] * r1[i] + r2[i] * r2[i]
-        ra[i] = axis[0] * r0[i] + axis[1] * r1[i] + axis[2] * r2[i]
-        rc[i] = centre[0] * r0[i] + centre[1] * r1[i] + centre[2] * r2[i]
-        rsize[i] = 1e-3 * (abs(r0[i]) + abs(r1[i]) + abs(r2[i]))
+        rr[i], ra[i], rc[i], rsize[i] = _ray_terms(r0[i], r1[i], r2[i], centre, axis)
     unsure = np.empty(s_n * n, np.int64)
     m = 0
     floor, sure = np.empty(s_n), np.empty(s_n, np.bool_)
@@ -33,17 +30,7 @@ def screened_bins(rays, planes, centre, axis, bins, margin, out):
         p0, p1, p2, d = planes[k, 0], planes[k, 1], planes[k, 2], planes[k, 3]
         for i in range(s_n):  # no branch: the loop runs on vector lanes (IEEE operations all the same)
             dot = p0 * r0[i] + p1 * r1[i] + p2 * r2[i]
-            size = abs(dot)
-            s = d / dot
-            along = s * ra[i] - ca
-            q2 = (s * rr[i] - 2 * rc[i]) * s + cc  # |s r - c|^2
-            across2 = q2 - along * along
-            f = along / (np.sqrt(across2) * bins)
-            fl = np.floor(f)
-            frac = f - fl
-            floor[i] = fl
-            sure[i] = ((size > rsize[i]) & (size > 1e-6) & (across2 > 1e-4 * (q2 + cc)) & (frac > tau)
-                       & (frac < 1 - tau))
+            floor[i], sure[i] = _screened_bin(dot, d, rr[i], ra[i], rc[i], rsize[i], cc, ca, bins, tau)
         for i in range(s_n):
             if sure[i]:
                 out[i, k] = np.int64(floor[i])
@@ -115,23 +102,37 @@ def screened_bins_at(rays, planes, k, centre, axis, bins, margin, out):
     m = 0
     for i in range(len(rays)):
         r0, r1, r2 = rays[i, 0], rays[i, 1], rays[i, 2]
-        rr = r0 * r0 + r1 * r1 + r2 * r2
-        ra = axis[0] * r0 + axis[1] * r1 + axis[2] * r2
-        rc = centre[0] * r0 + centre[1] * r1 + centre[2] * r2
-        rsize = 1e-3 * (abs(r0) + abs(r1) + abs(r2))
+        rr, ra, rc, rsize = _ray_terms(r0, r1, r2, centre, axis)
         p0, p1, p2, d = planes[k[i], 0], planes[k[i], 1], planes[k[i], 2], planes[k[i], 3]
-        dot = p0 * r0 + p1 * r1 + p2 * r2
-        size = abs(dot)
-        s = d / dot
-        along = s * ra - ca
-        q2 = (s * rr - 2 * rc) * s + cc
-        across2 = q2 - along * along
-        f = along / (np.sqrt(across2) * bins)
-        fl = np.floor(f)
-        frac = f - fl
-        if (size > rsize) and (size > 1e-6) and (across2 > 1e-4 * (q2 + cc)) and (frac > tau) and (frac < 1 - tau):
+        fl, sure = _screened_bin(p0 * r0 + p1 * r1 + p2 * r2, d, rr, ra, rc, rsize, cc, ca, bins, tau)
+        if sure:
             out[i] = np.int64(fl)
         else:
             unsure[m] = i
             m += 1
     return unsure[:m]
+
+
+@compiled
+def _ray_terms(r0, r1, r2, centre, axis):
+    """A ray's terms of the screened elevation: |r|^2, r . axis, r . centre, and 1e-3 of the sum of its
+    components' sizes (the least |ray . normal| the screen trusts)."""
+    rr = r0 * r0 + r1 * r1 + r2 * r2
+    ra = axis[0] * r0 + axis[1] * r1 + axis[2] * r2
+    rc = centre[0] * r0 + centre[1] * r1 + centre[2] * r2
+    return rr, ra, rc, 1e-3 * (abs(r0) + abs(r1) + abs(r2))
+
+
+@compiled
+def _screened_bin(dot, d, rr, ra, rc, rsize, cc, ca, bins, tau):
+    """The screened elevation bin of a ray (its ``_ray_terms``) on a plane with ray . normal ``dot`` and
+    offset ``d``, and whether it is sure (no branch: vector lanes). cc, ca : |centre|^2 and centre . axis."""
+    size = abs(dot)
+    s = d / dot
+    along = s * ra - ca
+    q2 = (s * rr - 2 * rc) * s + cc  # |s r - c|^2
+    across2 = q2 - along * along
+    f = along / (np.sqrt(across2) * bins)
+    fl = np.floor(f)
+    frac = f - fl
+    return fl, ((size > rsize) & (size > 1e-6) & (across2 > 1e-4 * (q2 + cc)) & (frac > tau) & (frac < 1 - tau))

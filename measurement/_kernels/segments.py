@@ -264,32 +264,35 @@ def crowded(row, col, h, size):
 
 
 @compiled
+def group_members(keys, n_keys):
+    """The positions of each key's entries among integer ``keys`` (K,) in [0, ``n_keys``), ascending: group
+    starts (n_keys + 1,) and positions (K,) (a stable counting sort)."""
+    starts = np.zeros(n_keys + 1, np.int64)
+    for i in range(len(keys)):
+        starts[keys[i] + 1] += 1
+    for s in range(n_keys):
+        starts[s + 1] += starts[s]
+    fill = starts[:-1].copy()
+    members = np.empty(len(keys), np.int64)
+    for i in range(len(keys)):
+        members[fill[keys[i]]] = i
+        fill[keys[i]] += 1
+    return starts, members
+
+
+@compiled
+def stable_group_order(keys, n_keys):
+    """``np.argsort(keys, kind="stable")`` for integer keys (K,) in [0, ``n_keys``): a counting sort."""
+    return group_members(keys, n_keys)[1]
+
+
+@compiled
 def segment_row_order(seg, v):
     """``np.lexsort((v, seg))`` for non-negative segment ids ``seg`` (M,) and integer rows ``v`` (M,): the
     centres by segment, then row, ties in index order. Two stable counting sorts (by row, then by
     segment) instead of a comparison sort."""
-    m = len(seg)
-    out = np.empty(m, np.int64)
-    if m == 0:
-        return out
-    v_lo, v_hi = v.min(), v.max()
-    count = np.zeros(v_hi - v_lo + 2, np.int64)
-    for i in range(m):
-        count[v[i] - v_lo + 1] += 1
-    for j in range(1, len(count)):
-        count[j] += count[j - 1]
-    by_row = np.empty(m, np.int64)
-    for i in range(m):
-        r = v[i] - v_lo
-        by_row[count[r]] = i
-        count[r] += 1
-    starts = np.zeros(seg.max() + 2, np.int64)
-    for i in range(m):
-        starts[seg[i] + 1] += 1
-    for j in range(1, len(starts)):
-        starts[j] += starts[j - 1]
-    for q in range(m):
-        i = by_row[q]
-        out[starts[seg[i]]] = i
-        starts[seg[i]] += 1
-    return out
+    if len(seg) == 0:
+        return np.empty(0, np.int64)
+    v_lo = v.min()
+    by_row = stable_group_order(v.astype(np.int64) - v_lo, np.int64(v.max()) - v_lo + 1)
+    return by_row[stable_group_order(seg[by_row], seg.max() + 1)]
