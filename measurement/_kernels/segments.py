@@ -216,8 +216,12 @@ def crowded(row, col, h, size):
     """Whether each centre's pixel (``row``, ``col``) (M,) int64 has at least ``size / 2`` marked pixels in
     the ``size`` x ``size`` square OpenCV's unnormalised ``boxFilter`` sums there (anchor ``size // 2``,
     zero border) over a mask of ``h`` rows marking every centre's pixel once: the same counts, read off
-    the centres' columns row by row instead of summed over the whole frame."""
+    a column histogram of the marked pixels in the square's rows, which slides down the frame (each row's
+    marks enter and leave it once)."""
     m = len(row)
+    if m == 0:
+        return np.zeros(0, np.bool_)
+    half = size // 2
     start = np.zeros(h + 1, np.int64)
     for i in range(m):
         start[row[i] + 1] += 1
@@ -228,38 +232,40 @@ def crowded(row, col, h, size):
     for i in range(m):
         who[fill[row[i]]] = i
         fill[row[i]] += 1
-    cols = np.empty(m, np.int64)
-    end = np.empty(h, np.int64)
+    # a pixel counts once: ``first`` marks the first centre of each (row, column) in the row's list
+    width = col.max() + 1
+    seen = np.full(width, -1, np.int64)
+    first = np.zeros(m, np.bool_)
     for r in range(h):
-        a, b = start[r], start[r + 1]
-        # each row's centres by column (insertion: detection yields them nearly so); its columns without
-        # repeats (a pixel counts once)
-        for j in range(a + 1, b):
-            x = who[j]
-            k = j
-            while k > a and col[who[k - 1]] > col[x]:
-                who[k] = who[k - 1]
-                k -= 1
-            who[k] = x
-        k = a
-        for j in range(a, b):
-            if j == a or col[who[j]] != cols[k - 1]:
-                cols[k] = col[who[j]]
-                k += 1
-        end[r] = k
-    half = size // 2
+        for j in range(start[r], start[r + 1]):
+            x = col[who[j]]
+            if seen[x] != r:
+                seen[x] = r
+                first[j] = True
+    hist = np.zeros(width + size, np.int64)  # marks per column in the square's rows, offset by half
     n = np.zeros(m, np.int64)
+    lo, hi = 0, 0  # rows [lo, hi) are in the histogram
     for v in range(h):
-        for r in range(max(v - half, 0), min(v - half + size, h)):
-            # the squares' column bounds rise along the row: two pointers sweep row r once
-            p0, p1 = start[r], start[r]
-            for j in range(start[v], start[v + 1]):
-                i = who[j]
-                while p0 < end[r] and cols[p0] < col[i] - half:
-                    p0 += 1
-                while p1 < end[r] and cols[p1] < col[i] - half + size:
-                    p1 += 1
-                n[i] += p1 - p0
+        if start[v] == start[v + 1]:
+            continue
+        a, b = max(v - half, 0), min(v - half + size, h)
+        while hi < b:
+            for j in range(start[hi], start[hi + 1]):
+                if first[j]:
+                    hist[col[who[j]] + half] += 1
+            hi += 1
+        while lo < a:
+            for j in range(start[lo], start[lo + 1]):
+                if first[j]:
+                    hist[col[who[j]] + half] -= 1
+            lo += 1
+        for j in range(start[v], start[v + 1]):
+            # columns col - half .. col - half + size - 1 sit at col .. col + size - 1 in hist
+            x = col[who[j]]
+            total = 0
+            for k in range(x, x + size):
+                total += hist[k]
+            n[who[j]] = total
     return 2 * n >= size
 
 
