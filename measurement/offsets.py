@@ -15,6 +15,7 @@ import numpy as np
 
 from . import _kernels
 from .planes import pencil_axis
+from .threads import second_core
 from .triangulation import intersect, kernel_layout
 
 _log = logging.getLogger(__name__)
@@ -104,11 +105,22 @@ def _bins_on_planes(rays: np.ndarray, planes: np.ndarray, bins: float, chunk: in
     1.9 M points of the bench views by at most 1.1e-16."""
     out = np.empty((len(rays), len(planes)), np.int64)
     centre, a = _projector_frame(planes)
-    for at in range(0, len(rays), chunk):
-        r = np.ascontiguousarray(rays[at:at + chunk])
-        unsure = _kernels.screened_bins(r, planes, centre, a, bins, 1e-5, out[at:at + chunk])
-        k, i = np.divmod(unsure, len(r))
+    starts = range(0, len(rays), chunk)
+
+    def screen(at: int) -> np.ndarray:
+        return _kernels.screened_bins(np.ascontiguousarray(rays[at:at + chunk]), planes, centre, a, bins, 1e-5,
+                                      out[at:at + chunk])
+
+    # the chunks are screened on both cores when there are several (each writes its own rows of out); the
+    # unsure bins are then formed exactly, chunk by chunk as before
+    later = second_core().submit(lambda: [screen(at) for at in starts[len(starts) // 2:]]) if len(starts) > 3 else None
+    unsure_all = [screen(at) for at in (starts[:len(starts) // 2] if later is not None else starts)]
+    if later is not None:
+        unsure_all += later.result()
+    for at, unsure in zip(starts, unsure_all, strict=True):
+        k, i = np.divmod(unsure, min(chunk, len(rays) - at))
         if len(i):
+            r = np.ascontiguousarray(rays[at:at + chunk])
             out[at + i, k] = _exact_bins(r.take(i, axis=0), planes.take(k, axis=0), planes, bins)
     return out
 
@@ -269,7 +281,7 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
     weighed = (len(rs) - lo - hi) / len(rs) >= 0.8
     rows = np.flatnonzero(weighed)
     table = table if table is not None else BinTable(rays, planes, bins)
-    cells, hits, counted = _kernels.distinct_cells(r[sub], *table.table(sub), offs[rows], n, deep, 20_000_000)
+    cells, hits, counted = _distinct_cells_both_cores(r[sub], *table.table(sub), offs[rows], n, deep)
     if not counted:  # bins too widely spread for a bitmap
         cells, hits = _offset_cells(r[sub], table.rows(sub), offs[rows], n, deep)
     conflicts = {int(offs[j]): float(hits[w] / cells[w]) for w, j in enumerate(rows)}
@@ -278,6 +290,22 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
     if _log.isEnabledFor(logging.DEBUG):
         _log.debug("occlusion conflicts %s", sorted(conflicts.items()))
     return conflicts, beyond
+
+
+_SPLIT_CELLS = 100_000  # centre-offset pairs above which a conflict curve's offsets are shared by both cores
+
+
+def _distinct_cells_both_cores(rel: np.ndarray, rows: np.ndarray, sub: np.ndarray, offsets: np.ndarray, n: int,
+                               deep: np.ndarray, most: int = 20_000_000) -> tuple[np.ndarray, np.ndarray, bool]:
+    """``_kernels.distinct_cells`` (each offset's cells are counted on their own), the later half of the
+    offsets on the second core when the curve is large; counted only if both halves were."""
+    if len(rel) * len(offsets) < _SPLIT_CELLS or len(offsets) < 4:
+        return _kernels.distinct_cells(rel, rows, sub, offsets, n, deep, most)
+    half = len(offsets) // 2
+    later = second_core().submit(_kernels.distinct_cells, rel, rows, sub, offsets[half:], n, deep, most)
+    cells, hits, counted = _kernels.distinct_cells(rel, rows, sub, offsets[:half], n, deep, most)
+    cells2, hits2, counted2 = later.result()
+    return np.concatenate([cells, cells2]), np.concatenate([hits, hits2]), counted and counted2
 
 
 def _offset_cells(rel: np.ndarray, rows: np.ndarray, offsets: np.ndarray, n: int, deep: np.ndarray

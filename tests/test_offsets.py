@@ -202,3 +202,25 @@ def test_lit_cells_screened_ray_by_ray_are_the_cells_of_the_exact_formula():
     which = np.flatnonzero(rng.random(20000) < 0.7)
     exact = elevation_bins(intersect(rays[which], planes[labels[which]]), planes, 0.002)
     assert np.array_equal(lit_cells(rays, planes, labels, which), _unique_cells(labels[which], exact, 40))
+
+
+def test_elevation_bins_and_conflict_cells_shared_by_both_cores_are_those_of_one():
+    from measurement import _kernels, offsets
+    from measurement.triangulation import intersect
+
+    planes = default_rig((1536, 1024), 40).projector.planes_cam()
+    rng = np.random.default_rng(13)
+    m = 9000  # five chunks of rays: two screened on the second core
+    rays = np.column_stack([rng.uniform(-0.4, 0.4, m), rng.uniform(-0.3, 0.3, m), np.ones(m)])
+    bins = offsets._bins_on_planes(rays, planes, 0.002)
+    for k in (0, 17, 39):
+        assert np.array_equal(bins[:, k], offsets.elevation_bins(intersect(rays, planes[np.full(m, k)]), planes,
+                                                                  0.002))
+    rel = rng.integers(-5, 6, m)
+    sub = rng.permutation(m)[:6000]
+    deep = np.unique(rng.integers(0, 40, 5000) * 1_000_000 + rng.choice(bins.ravel(), 5000))
+    offs = np.arange(5, 35)
+    both = offsets._distinct_cells_both_cores(rel[sub], bins, sub, offs, 40, deep)
+    one = _kernels.distinct_cells(rel[sub], bins, sub, offs, 40, deep, 20_000_000)
+    assert len(rel[sub]) * len(offs) >= offsets._SPLIT_CELLS and both[2] and one[2]
+    assert np.array_equal(both[0], one[0]) and np.array_equal(both[1], one[1]) and one[1].any()
