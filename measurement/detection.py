@@ -14,7 +14,6 @@ kept; ``reliable`` flags centres whose position should not reach the point cloud
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from functools import cached_property
 
@@ -23,6 +22,7 @@ import numpy as np
 
 from . import _kernels
 from .errors import ImageError, StripeDetectionError
+from .threads import band_workers
 
 
 @dataclass(frozen=True)
@@ -179,9 +179,8 @@ _WORKERS = min(4, os.cpu_count() or 1)
 def _all_bands(g: np.ndarray, params: DetectionParams) -> tuple[np.ndarray, ...]:
     """x, y, u, contrast, width, flank of every candidate in the gray image g (H, W), in raster order."""
     h = g.shape[0]
-    with ThreadPoolExecutor(_WORKERS) as pool:
-        found = list(pool.map(lambda a: _band_centres(g, a, min(a + _BAND_ROWS, h), params),
-                              range(0, h, _BAND_ROWS)))
+    found = list(band_workers(_WORKERS).map(lambda a: _band_centres(g, a, min(a + _BAND_ROWS, h), params),
+                                            range(0, h, _BAND_ROWS)))
     return tuple(np.concatenate(z) for z in zip(*found, strict=True))
 
 

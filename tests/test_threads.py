@@ -35,3 +35,26 @@ def test_a_scan_runs_its_products_on_one_thread(monkeypatch, small_capture):
     cal = load_calibration(small_capture / "truth" / "truth.json")
     pipeline.scan(read_image(small_capture / "scan" / "side.png"), cal, "side")
     assert seen == [{1}]
+
+
+def test_a_child_forked_after_a_scan_starts_its_own_threads():
+    import multiprocessing
+
+    from measurement.detection import detect_centres
+
+    rng = np.random.default_rng(3)
+    image = (rng.random((600, 400)) * 20).astype(np.uint8)
+    image[:, 100::40] = 200  # ten bright columns: stripes in every band of rows
+    parent = len(detect_centres(image))
+    assert parent > 0 and threads.second_core().submit(lambda: 1).result() == 1  # both pools have threads
+
+    def child(queue):
+        queue.put((len(detect_centres(image)), threads.second_core().submit(lambda: 2).result()))
+
+    ctx = multiprocessing.get_context("fork")
+    queue = ctx.Queue()
+    proc = ctx.Process(target=child, args=(queue,))
+    proc.start()
+    proc.join(60)
+    assert proc.exitcode == 0
+    assert queue.get(timeout=5) == (parent, 2)
