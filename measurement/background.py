@@ -173,12 +173,20 @@ def segments_on_planes(rays, planes, seg, seg_label: dict[int, int], bg_planes, 
     return set(sids[on].tolist())
 
 
-def split_foreground(c, seg, labels, on_bg, link, min_rows):
-    """Unlabel centres off the background and re-link them into their own segments."""
-    m = len(seg)
+def foreground_mask(c, seg: np.ndarray, labels: np.ndarray, on_bg: np.ndarray) -> np.ndarray:
+    """(M,) bool: the centres to take off the background: unlabelled, off the background planes (``on_bg``
+    (M,) false), or within 15 rows of such a labelled centre in their segment. After ``relink_foreground``
+    the labels of the others are unchanged (``labels`` are whole-segment), and these have none."""
     fg = (labels < 0) | ~on_bg
     # near the junction of a merged segment the last background-looking centres are suspect too
     fg |= _rows_to_foreground(seg, c.v, fg, fg & (labels >= 0)) <= 15
+    return fg
+
+
+def relink_foreground(c, seg, labels, fg, link, min_rows):
+    """Unlabel the centres of ``foreground_mask`` fg (M,) and re-link them into their own segments: new
+    segment ids (M,), long-segment mask (M,) and segment -> label of the kept segments."""
+    m = len(seg)
     fg_idx = np.nonzero(fg)[0]
     sub = c.take(fg)
     fseg = split_at_changes(sub, link_segments(sub, link)) if len(fg_idx) else np.zeros(0, np.int64)

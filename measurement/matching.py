@@ -28,9 +28,10 @@ from .background import (
     background_like,
     background_planes,
     claim_background,
+    foreground_mask,
     near_planes,
+    relink_foreground,
     segments_on_planes,
-    split_foreground,
 )
 from .detection import Centres, reliable
 from .offsets import (
@@ -209,8 +210,13 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     bg_planes = background_planes(rays, planes, labels)
     if bg_planes is not None:
         on_bg = near_planes(intersect(rays, planes.take(np.clip(labels, 0, n - 1), axis=0)), bg_planes) & (labels >= 0)
-        seg, long_seg, seg_label = split_foreground(c, seg, labels, on_bg, link, params.min_segment_rows)
-    spacing_mm = _stripe_spacing_mm(c, rays, planes, seg, seg_label, left)
+        fg = foreground_mask(c, seg, labels, on_bg)
+        # the foreground is re-linked on the second core; the stripe spacing needs only the labels kept
+        relinked = second_core().submit(relink_foreground, c, seg, labels, fg, link, params.min_segment_rows)
+        spacing_mm = _spacing_of_labels(c, rays, planes, np.where(fg, -1, labels), left)
+        seg, long_seg, seg_label = relinked.result()
+    else:
+        spacing_mm = _stripe_spacing_mm(c, rays, planes, seg, seg_label, left)
     tol = spacing_mm * params.continuity
     # 3: the background grows over its own surfaces; a segment joins it only if it then lies on them
     pairs = _neighbour_pairs(seg, long_seg, left, right)  # every growth below takes its centres' share
@@ -589,7 +595,11 @@ def _touching(seg: np.ndarray, left: np.ndarray, right: np.ndarray, flags: np.nd
 
 def _stripe_spacing_mm(c, rays, planes, seg, seg_label, left) -> float:
     """Median 3D distance between labelled row neighbours with consecutive labels (mm)."""
-    lab = _labels_of(seg, seg_label, np.ones(len(seg), bool))
+    return _spacing_of_labels(c, rays, planes, _labels_of(seg, seg_label, np.ones(len(seg), bool)), left)
+
+
+def _spacing_of_labels(c, rays, planes, lab, left) -> float:
+    """``_stripe_spacing_mm`` of the per-centre labels lab (M,) (-1 for none)."""
     have = (lab >= 0) & (left >= 0)
     have[have] &= lab[left[have]] == lab[have] - 1
     idx = np.nonzero(have)[0]
