@@ -218,3 +218,22 @@ def test_stable_group_order_is_a_stable_argsort():
     rng = np.random.default_rng(11)
     keys = rng.integers(0, 250, 30000)
     assert np.array_equal(_kernels.stable_group_order(keys, 260), np.argsort(keys, kind="stable"))
+
+
+def test_denoise_counted_on_both_cores_keeps_what_one_count_keeps():
+    from measurement.detection import Centres
+    from measurement.segments import denoise
+
+    rng = np.random.default_rng(8)
+    h, w, m = 700, 900, 40_000
+    v = np.sort(rng.integers(0, h, m))
+    u = np.empty(m)
+    for row in np.unique(v):  # each row's centres left to right: some on stripes, some scattered
+        at = np.flatnonzero(v == row)
+        u[at] = np.sort(np.where(rng.random(len(at)) < 0.7, rng.integers(0, 30, len(at)) * 30.0,
+                                 rng.uniform(0, w - 1, len(at))))
+    c = Centres(u, v.astype(np.int32), np.full(m, 20, np.float32), np.full(m, 5, np.float32))
+    ui = np.clip(np.rint(u).astype(np.int64), 0, w - 1)
+    keep = denoise(c, (h, w))
+    assert np.array_equal(keep, _kernels.crowded(v.astype(np.int64), ui, h, 5))
+    assert keep.any() and not keep.all()
