@@ -19,6 +19,7 @@ Here (status and figures: docs/benchmarks.md; the animal's offset is not yet rel
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -185,11 +186,13 @@ class Labels:
     faint_shadow: bool = False
 
 
-def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple[int, int],
-                  params: MatchingParams = MatchingParams()) -> Labels:
+def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], planes: np.ndarray,
+                  shape: tuple[int, int], params: MatchingParams = MatchingParams()) -> Labels:
     """Stripe index (M,) for each centre, -1 where none can be trusted.
 
-    rays : (M, 3) viewing rays of the centres (z = 1); planes : (N, 4) light planes, left to right
+    rays : (M, 3) viewing rays of the centres (z = 1), or a function that gives them (called while the
+           second core links the centres into segments, which needs no rays)
+    planes : (N, 4) light planes, left to right
     """
     n = len(planes)
     m = len(c)
@@ -200,6 +203,8 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     linking = second_core().submit(lambda: split_at_changes(c, link_segments(c, link, order)))
     left, right = row_neighbours(c, order)
     main_rows = main_row_labels(c, n, order)
+    if callable(rays):
+        rays = rays()
     seg = linking.result()
     long_seg = np.bincount(seg)[seg] >= params.min_segment_rows
     # 1: the background (floor, wall) from complete rows
@@ -210,10 +215,10 @@ def label_centres(c: Centres, rays: np.ndarray, planes: np.ndarray, shape: tuple
     bg_planes = background_planes(rays, planes, labels)
     if bg_planes is not None:
         on_bg = near_planes(intersect(rays, planes.take(np.clip(labels, 0, n - 1), axis=0)), bg_planes) & (labels >= 0)
-        fg = foreground_mask(c, seg, labels, on_bg)
+        off_bg = foreground_mask(c, seg, labels, on_bg)
         # the foreground is re-linked on the second core; the stripe spacing needs only the labels kept
-        relinked = second_core().submit(relink_foreground, c, seg, labels, fg, link, params.min_segment_rows)
-        spacing_mm = _spacing_of_labels(c, rays, planes, np.where(fg, -1, labels), left)
+        relinked = second_core().submit(relink_foreground, c, seg, labels, off_bg, link, params.min_segment_rows)
+        spacing_mm = _spacing_of_labels(c, rays, planes, np.where(off_bg, -1, labels), left)
         seg, long_seg, seg_label = relinked.result()
     else:
         spacing_mm = _stripe_spacing_mm(c, rays, planes, seg, seg_label, left)

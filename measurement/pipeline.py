@@ -77,8 +77,14 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
         centres = centres.take(denoise(centres, image.shape[:2]))
     t["denoise"] = time.perf_counter()
     table = ray_table(calibration.intrinsics)
-    rays, cells = rays_and_cells(centres.u, centres.v, table)
+    looked_up: list = []  # the centres' rays and table cells, looked up while matching links the segments
+
+    def rays() -> np.ndarray:
+        looked_up.extend(rays_and_cells(centres.u, centres.v, table))
+        return looked_up[0]
+
     labels = label_centres(centres, rays, calibration.planes, image.shape[:2], params.matching)
+    cells = looked_up[1] if looked_up else rays_and_cells(centres.u, centres.v, table)[1]
     t["match"] = time.perf_counter()
     seg_ids = labels.segment if labels.segment is not None else np.arange(len(centres))
     smooth_u, ok = smooth_along_segments(centres, seg_ids, labels.stripe)

@@ -386,3 +386,18 @@ def test_compiled_slope_growth_joins_as_the_python_rounds_do(monkeypatch, slope_
         grown.append(list(seg_label.items()))
     assert grown[0] == grown[1]
     assert len(grown[0]) > 2  # something grew
+
+
+def test_rays_given_as_a_function_are_looked_up_during_the_linking_and_label_the_same(small_capture, side):
+    img, c, _, _ = side
+    cal = load_calibration(small_capture / "truth" / "truth.json")
+    rays = rays_at(c.u, c.v, ray_table(cal.intrinsics))
+    calls = []
+
+    def lookup():
+        calls.append(1)
+        return rays
+
+    lazy = label_centres(c, lookup, cal.planes, img.shape)
+    assert calls == [1]
+    assert np.array_equal(lazy.stripe, label_centres(c, rays, cal.planes, img.shape).stripe)
