@@ -7,6 +7,7 @@ import numpy as np
 
 from . import _kernels
 from .segments import label_table, link_segments, split_at_changes
+from .threads import second_core
 from .triangulation import depth_for_labels, intersect
 
 
@@ -63,13 +64,24 @@ def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray,
     ``chunk`` rays, formed only for a chunk that has such a case)."""
     normals = np.ascontiguousarray(bg_planes[:, :3].T)  # (3, P)
     out = np.empty((len(rays), len(planes)), bool)
-    for a in range(0, len(rays), chunk):
-        r = np.ascontiguousarray(rays[a:a + chunk])
-        unsure = _kernels.near_any_plane(r, planes, bg_planes, tol_mm, out[a:a + chunk])
-        if len(unsure):
-            i, k = np.divmod(unsure, len(planes))
-            z = depth_for_labels(r, planes)
-            out[a + i, k] = _near_exact(r[i] * z[i, k][:, None], normals, bg_planes[:, 3], tol_mm)
+
+    def screen(starts: range) -> None:
+        for a in starts:
+            r = np.ascontiguousarray(rays[a:a + chunk])
+            unsure = _kernels.near_any_plane(r, planes, bg_planes, tol_mm, out[a:a + chunk])
+            if len(unsure):
+                i, k = np.divmod(unsure, len(planes))
+                z = depth_for_labels(r, planes)
+                out[a + i, k] = _near_exact(r[i] * z[i, k][:, None], normals, bg_planes[:, 3], tol_mm)
+
+    starts = range(0, len(rays), chunk)
+    if len(starts) < 4:
+        screen(starts)
+        return out
+    # each chunk writes its own rows: the later half on the second core
+    later = second_core().submit(screen, starts[len(starts) // 2:])
+    screen(starts[:len(starts) // 2])
+    later.result()
     return out
 
 
@@ -107,10 +119,13 @@ def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, mi
     cand = long_seg & ~labelled[seg]
     sizes = np.bincount(seg[cand], minlength=seg.max() + 1)
     sids = np.nonzero(sizes >= min_rows)[0]
+    # the labelled background's flatness, on the second core while the candidates are weighed
+    flatness_bg = second_core().submit(_background_flatness, rays, planes, seg, seg_label, bg_planes)
     frac, idx, starts = _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm)
     hits = frac >= share
     one = np.nonzero(hits.sum(axis=1) == 1)[0]
     if len(one) == 0:
+        flatness_bg.result()
         return {}
     k = hits[one].argmax(axis=1)
     # the claimed segments' median distance from the nearest background plane at their index
@@ -120,7 +135,7 @@ def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, mi
     counts = np.diff(starts)[one]
     dist = _plane_distance(intersect(rays.take(members, axis=0), planes.take(np.repeat(k, counts), axis=0)),
                            bg_planes)
-    flat = _group_medians(dist, counts) <= flatness * _background_flatness(rays, planes, seg, seg_label, bg_planes)
+    flat = _group_medians(dist, counts) <= flatness * flatness_bg.result()
     return dict(zip(sids[one][flat].tolist(), k[flat].tolist(), strict=True))
 
 

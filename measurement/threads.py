@@ -10,20 +10,46 @@ its products on one thread; its own parallel parts (detection's bands) are threa
 from __future__ import annotations
 
 import os
-from concurrent.futures import ThreadPoolExecutor
+import threading
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import AbstractContextManager
+from typing import TypeVar
+
+T = TypeVar("T")
+
+_SECOND = "bodyscan-second"
+
+
+class SecondCore:
+    """One worker thread for the parts of a scan that can run beside the main one (the compiled kernels and
+    large NumPy operations release the interpreter). A task submitted from that thread itself runs at once
+    in it: waiting for the one worker from inside it would never end."""
+
+    def __init__(self) -> None:
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix=_SECOND)
+
+    def submit(self, fn: Callable[..., T], /, *args, **kwargs) -> Future[T]:
+        if not threading.current_thread().name.startswith(_SECOND):
+            return self._pool.submit(fn, *args, **kwargs)
+        done: Future[T] = Future()
+        try:
+            done.set_result(fn(*args, **kwargs))
+        except BaseException as error:  # handed to the caller by result(), as the pool would
+            done.set_exception(error)
+        return done
+
 
 _controller = None
-_executor: ThreadPoolExecutor | None = None
+_executor: SecondCore | None = None
 _bands: ThreadPoolExecutor | None = None
 
 
-def second_core() -> ThreadPoolExecutor:
-    """One worker thread for the parts of a scan that can run beside the main one (the compiled kernels and
-    large NumPy operations release the interpreter), started on first use."""
+def second_core() -> SecondCore:
+    """The scan's ``SecondCore``, started on first use."""
     global _executor
     if _executor is None:
-        _executor = ThreadPoolExecutor(1, thread_name_prefix="bodyscan")
+        _executor = SecondCore()
     return _executor
 
 

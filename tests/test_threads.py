@@ -58,3 +58,18 @@ def test_a_child_forked_after_a_scan_starts_its_own_threads():
     proc.join(60)
     assert proc.exitcode == 0
     assert queue.get(timeout=5) == (parent, 2)
+
+
+def test_work_handed_to_the_second_core_from_the_second_core_runs_there_at_once():
+    core = threads.second_core()
+
+    def outer():
+        inner = core.submit(lambda: threading.current_thread().name)
+        return threading.current_thread().name, inner.result(timeout=5)
+
+    import threading
+
+    outer_name, inner_name = core.submit(outer).result(timeout=10)
+    assert outer_name == inner_name and outer_name.startswith("bodyscan-second")
+    failing = core.submit(lambda: core.submit(lambda: 1 / 0).exception(timeout=5))
+    assert isinstance(failing.result(timeout=10), ZeroDivisionError)
