@@ -11,6 +11,7 @@ from scipy.optimize import least_squares
 
 from . import _kernels
 from .board import abc_to_plane, fit_plane_abc
+from .threads import second_core
 
 PLANE_METHODS = ("abc", "tls", "robust", "pencil")
 
@@ -74,7 +75,7 @@ def fit_plane_robust(points: np.ndarray, rng: np.random.Generator | None = None,
     good = norm > 1e-9
     n = n[good] / norm[good, None]
     d = np.einsum("ij,ij->i", n, tri[good, 0])
-    counts = _kernels.inlier_counts(sample, n, d, tol)
+    counts = _inlier_counts(sample, n, d, tol)
     best = np.append(n[np.argmax(counts)], d[np.argmax(counts)]) if len(counts) else fit_plane_tls(pts)
     if refine_points is not None and len(pts) > refine_points:
         pts = pts[::-(-len(pts) // refine_points)]
@@ -95,6 +96,16 @@ def fit_plane_robust(points: np.ndarray, rng: np.random.Generator | None = None,
             break
         inl = new
     return (fit_plane_tls(pts[used]) if exact else _orient(plane)), inl
+
+
+def _inlier_counts(sample: np.ndarray, n: np.ndarray, d: np.ndarray, tol: float) -> np.ndarray:
+    """``_kernels.inlier_counts`` (each hypothesis (H,) scored on its own), the later half of many on the
+    second core."""
+    if len(n) < 64:
+        return _kernels.inlier_counts(sample, n, d, tol)
+    half = len(n) // 2
+    later = second_core().submit(_kernels.inlier_counts, sample, n[half:], d[half:], tol)
+    return np.concatenate([_kernels.inlier_counts(sample, n[:half], d[:half], tol), later.result()])
 
 
 class _Moments:
