@@ -185,7 +185,9 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
     out["body_length_mm"] = None
     if not groups:
         return out
-    box = second_core().submit(_box, points)  # the cross-check needs only the points: beside the rest
+    # the cross-check and the length need only the points and their rows: beside the extents
+    box = second_core().submit(_box, points)
+    length_job = second_core().submit(_length, points, stripe, rows, groups, params.min_group)
     # each group's points in their original order (one stable sort instead of a mask per group)
     order = np.argsort(stripe, kind="stable")
     ks_sorted, ks_arr = stripe[order], np.array(groups)
@@ -197,7 +199,7 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
     out["body_height_mm"] = round(ext, 2)
     out[name] = {"value_mm": round(ext, 2), "stripe": k_best, "points": ends.tolist()}
     out["body_height_is"] = name
-    length = _length(points, stripe, rows, groups, params.min_group)
+    length = length_job.result()
     if length is not None:
         out["body_length_mm"] = round(length["value_mm"], 2)
         out["body_length"] = length
