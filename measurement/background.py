@@ -177,11 +177,18 @@ def background_like(rays, planes, seg, mask, bg_planes, exclude: set, share: flo
     return out
 
 
-def segments_on_planes(rays, planes, seg, seg_label: dict[int, int], bg_planes, share: float = 0.9) -> set[int]:
+def segments_on_planes(rays, planes, seg, seg_label: dict[int, int], bg_planes, share: float = 0.9,
+                       members: tuple[np.ndarray, np.ndarray] | None = None) -> set[int]:
     """The segments of ``seg_label`` (segment -> stripe index) whose points, on their stripe's plane, lie
-    on the background planes for at least ``share`` of their centres."""
+    on the background planes for at least ``share`` of their centres. ``members`` : the centres of each
+    segment (``_kernels.group_members(seg, seg.max() + 1)``), when known: a few segments' centres are then
+    gathered instead of found among all."""
     table = label_table(seg, seg_label)
-    idx = np.nonzero(table[seg] >= 0)[0]
+    if members is None:
+        idx = np.nonzero(table[seg] >= 0)[0]
+    else:
+        starts, by_seg = members
+        idx = np.sort(np.concatenate([by_seg[starts[s]:starts[s + 1]] for s in seg_label]))
     near = near_planes(intersect(rays.take(idx, axis=0), planes.take(table[seg[idx]], axis=0)), bg_planes)
     sids = np.fromiter(seg_label.keys(), np.int64)
     on = np.bincount(seg[idx], weights=near)[sids] / np.bincount(seg[idx])[sids] >= share

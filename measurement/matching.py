@@ -552,6 +552,7 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
     newly = table >= 0
     steps: dict[int, np.ndarray] | None = None
     since = None
+    members = _kernels.group_members(seg, len(table)) if bg_planes is not None else None
     for _ in range(40):
         # only segments beside a newly labelled one can vote differently from the round before; the others
         # would repeat its outcome (no label, or one the plane test refused)
@@ -561,7 +562,7 @@ def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n,
         new = _votes(rays, planes, table, pairs, tol_mm, n, depth_only, False, min_share, gaps, active, slope,
                      steps)
         if bg_planes is not None and new:
-            on = segments_on_planes(rays, planes, seg, new, bg_planes)
+            on = segments_on_planes(rays, planes, seg, new, bg_planes, members=members)
             new = {s: k for s, k in new.items() if s in on}
         if not new:
             break

@@ -35,6 +35,7 @@ from .rays import depth_screen, intersect, neighbour_distances, rays_at
 from .segments import (
     change_cuts,
     crowded,
+    group_members,
     link_components,
     segment_row_order,
     smooth_runs,
@@ -58,6 +59,7 @@ __all__ = [
     "group_counts",
     "group_extents",
     "group_medians",
+    "group_members",
     "grow_by_depth",
     "grow_by_slope",
     "grow_piece",
