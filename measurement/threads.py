@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import os
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
-from contextlib import AbstractContextManager
+from contextlib import contextmanager
 from typing import TypeVar
 
 T = TypeVar("T")
@@ -64,20 +64,56 @@ def band_workers(workers: int) -> ThreadPoolExecutor:
 
 def _forget_threads() -> None:
     """In a child process forked after a scan the pools' threads do not exist: start new ones on first use
-    (a pool that counts its dead threads as running never starts a task)."""
-    global _executor, _bands
+    (a pool that counts its dead threads as running never starts a task). Scans open in the parent's other
+    threads are not running here: no BLAS limit is held, and the lock starts free."""
+    global _executor, _bands, _blas_lock, _blas_users, _blas_limit
     _executor = _bands = None
+    _blas_lock, _blas_users, _blas_limit = threading.Lock(), 0, None
 
 
 os.register_at_fork(after_in_child=_forget_threads)
 
 
-def one_blas_thread() -> AbstractContextManager:
-    """A context in which the BLAS libraries loaded so far use one thread (restored on exit). About 15 us;
-    the libraries are looked up once, on the first call (about 1 ms)."""
-    global _controller
-    if _controller is None:
-        from threadpoolctl import ThreadpoolController
+_blas_lock = threading.Lock()
+_blas_users = 0
+_blas_limit = None  # threadpoolctl's limit while any scan runs
 
-        _controller = ThreadpoolController()
-    return _controller.limit(limits=1, user_api="blas")
+
+def _limit_blas() -> None:
+    """On the second core: BLAS to one thread. threadpoolctl lets one Python thread at a time set the
+    OpenBLAS pool's size (process-wide), so the second core, which outlives every scan, always does."""
+    global _blas_limit
+    assert _controller is not None
+    _blas_limit = _controller.limit(limits=1, user_api="blas").__enter__()
+
+
+def _restore_blas() -> None:
+    """On the second core: the BLAS thread counts from before ``_limit_blas``."""
+    global _blas_limit
+    if _blas_limit is not None:
+        _blas_limit.__exit__(None, None, None)
+        _blas_limit = None
+
+
+@contextmanager
+def one_blas_thread() -> Iterator[None]:
+    """A context in which the BLAS libraries loaded so far use one thread; the previous counts come back when
+    the last of the contexts open at once (scans in several threads) is left. Set and restored on the second
+    core (not to be entered from it). About 0.1 ms; the libraries are looked up once, on the first call
+    (about 1 ms)."""
+    global _controller, _blas_users
+    with _blas_lock:
+        if _controller is None:
+            from threadpoolctl import ThreadpoolController
+
+            _controller = ThreadpoolController()
+        if _blas_users == 0:
+            second_core().submit(_limit_blas).result()
+        _blas_users += 1
+    try:
+        yield
+    finally:
+        with _blas_lock:
+            _blas_users -= 1
+            if _blas_users == 0:
+                second_core().submit(_restore_blas).result()

@@ -156,3 +156,22 @@ def test_sixteen_bit_and_colour_frames_scan_as_their_eight_bit_gray(small_captur
         r = scan(other, truth_cal, "side")
         np.testing.assert_array_equal(r.stripe, gray.stripe)
         np.testing.assert_allclose(r.points, gray.points)
+
+
+def test_scans_in_several_threads_at_once_give_each_its_own_result(small_capture, truth_cal):
+    """The scan's helper threads (detection's bands, the second core) are shared by every scan in the
+    process: scans from several threads at once queue on them and each gets what it gets alone."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    side = read_image(small_capture / "scan" / "side.png")
+    rng = np.random.default_rng(1)
+    noisier = np.clip(side.astype(np.int16) + rng.integers(-3, 4, side.shape), 0, 255).astype(np.uint8)
+    frames = [side, noisier]
+    alone = [scan(f, truth_cal) for f in frames]
+    assert not np.array_equal(alone[0].points, alone[1].points)
+    with ThreadPoolExecutor(4) as pool:
+        results = list(pool.map(lambda i: scan(frames[i % 2], truth_cal), range(8)))
+    for i, r in enumerate(results):
+        own = alone[i % 2]
+        assert np.array_equal(r.points, own.points) and np.array_equal(r.stripe, own.stripe)
+        assert r.measurements["body_height_mm"] == own.measurements["body_height_mm"]

@@ -73,3 +73,33 @@ def test_work_handed_to_the_second_core_from_the_second_core_runs_there_at_once(
     assert outer_name == inner_name and outer_name.startswith("bodyscan-second")
     failing = core.submit(lambda: core.submit(lambda: 1 / 0).exception(timeout=5))
     assert isinstance(failing.result(timeout=10), ZeroDivisionError)
+
+
+def test_scans_overlapping_in_threads_leave_the_blas_threads_as_they_found_them():
+    import threading
+
+    np.ones((4, 4)) @ np.ones((4, 4))
+    before = _blas_threads()
+    first_in, second_in, first_out = threading.Event(), threading.Event(), threading.Event()
+    seen = {}
+
+    def first():
+        with threads.one_blas_thread():
+            first_in.set()
+            second_in.wait(5)
+        first_out.set()
+
+    def second():
+        first_in.wait(5)
+        with threads.one_blas_thread():
+            second_in.set()
+            first_out.wait(5)
+            seen["after the first left"] = set(_blas_threads())  # the second is still inside
+
+    workers = [threading.Thread(target=first), threading.Thread(target=second)]
+    for w in workers:
+        w.start()
+    for w in workers:
+        w.join(10)
+    assert seen["after the first left"] == {1}
+    assert _blas_threads() == before
