@@ -240,3 +240,12 @@ def test_denoise_counted_on_both_cores_keeps_what_one_count_keeps():
     keep = denoise(c, (h, w))
     assert np.array_equal(keep, _kernels.crowded(v.astype(np.int64), ui, h, 5))
     assert keep.any() and not keep.all()
+
+
+def test_segment_rows_sorts_as_lexsort_does_with_rows_in_order_or_not():
+    from measurement.segments import segment_rows
+
+    rng = np.random.default_rng(9)
+    seg = rng.integers(0, 300, 5000)
+    for v in (np.sort(rng.integers(0, 900, 5000)), rng.integers(0, 900, 5000)):  # by row (detection), shuffled
+        assert np.array_equal(segment_rows(seg, v), np.lexsort((v, seg)))
