@@ -51,7 +51,8 @@ def row_order(c: Centres) -> np.ndarray:
     """``np.lexsort((c.u, c.v))``: the centres (M,) by row, then column. One stable sort of a combined
     key (detection yields them nearly in that order already); a lexsort only when the key ties."""
     key = c.v.astype(np.float64) * 1e5 + c.u
-    order = np.argsort(key, kind="stable")
+    # detection lists the centres so already (then the stable sort is the identity)
+    order = np.arange(len(key)) if (key[1:] >= key[:-1]).all() else np.argsort(key, kind="stable")
     a, b = order[:-1], order[1:]
     tie = key[a] == key[b]
     # a key tie of two centres that differ (closer than the key resolves) needs the real lexsort; both

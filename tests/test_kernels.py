@@ -249,3 +249,15 @@ def test_segment_rows_sorts_as_lexsort_does_with_rows_in_order_or_not():
     seg = rng.integers(0, 300, 5000)
     for v in (np.sort(rng.integers(0, 900, 5000)), rng.integers(0, 900, 5000)):  # by row (detection), shuffled
         assert np.array_equal(segment_rows(seg, v), np.lexsort((v, seg)))
+
+
+def test_row_order_sorts_as_lexsort_does_listed_by_row_or_not():
+    from measurement.detection import Centres
+    from measurement.segments import row_order
+
+    rng = np.random.default_rng(10)
+    v = rng.integers(0, 300, 4000).astype(np.int32)
+    u = rng.integers(0, 2000, 4000) + rng.choice([0.0, 0.25, 0.5], 4000)  # repeated columns in a row too
+    for order in (np.lexsort((u, v)), rng.permutation(4000)):  # as detection lists them, and shuffled
+        c = Centres(u[order], v[order], np.zeros(4000, np.float32), np.zeros(4000, np.float32))
+        assert np.array_equal(row_order(c), np.lexsort((c.u, c.v)))
