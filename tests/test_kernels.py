@@ -261,3 +261,14 @@ def test_row_order_sorts_as_lexsort_does_listed_by_row_or_not():
     for order in (np.lexsort((u, v)), rng.permutation(4000)):  # as detection lists them, and shuffled
         c = Centres(u[order], v[order], np.zeros(4000, np.float32), np.zeros(4000, np.float32))
         assert np.array_equal(row_order(c), np.lexsort((c.u, c.v)))
+
+
+def test_union_sorted_merges_as_the_sort_of_both_does():
+    from measurement.offsets import in_sorted, union_sorted
+
+    rng = np.random.default_rng(11)
+    for na, nb in ((0, 5), (5, 0), (3000, 400), (400, 3000), (1, 1)):
+        a = np.unique(rng.integers(0, 5000, na)).astype(np.int64)
+        b = np.unique(np.concatenate([rng.integers(0, 5000, nb), a[: len(a) // 3]])).astype(np.int64)
+        reference = np.sort(np.concatenate([a, b[~in_sorted(b, a)]]), kind="stable")
+        assert np.array_equal(union_sorted(a, b), reference) and np.array_equal(reference, np.union1d(a, b))

@@ -30,7 +30,7 @@ from .growth import (
     segment_steps,
     voting_pairs,
 )
-from .offsets import distinct_cells, screened_bins, screened_bins_at
+from .offsets import distinct_cells, merge_distinct, screened_bins, screened_bins_at
 from .rays import depth_screen, intersect, neighbour_distances, rays_at
 from .segments import (
     change_cuts,
@@ -67,6 +67,7 @@ __all__ = [
     "intersect",
     "link_components",
     "majority",
+    "merge_distinct",
     "near_any_plane",
     "neighbour_distances",
     "neighbour_pairs",

@@ -136,3 +136,32 @@ def _screened_bin(dot, d, rr, ra, rc, rsize, cc, ca, bins, tau):
     fl = np.floor(f)
     frac = f - fl
     return fl, ((size > rsize) & (size > 1e-6) & (across2 > 1e-4 * (q2 + cc)) & (frac > tau) & (frac < 1 - tau))
+
+
+@compiled
+def merge_distinct(a, b):
+    """The sorted union (K,) of two sorted arrays of distinct values a (A,) and b (B,), each value once: one
+    merge (``offsets.union_sorted``)."""
+    out = np.empty(len(a) + len(b), a.dtype)
+    i, j, k = 0, 0, 0
+    while i < len(a) and j < len(b):
+        if a[i] < b[j]:
+            out[k] = a[i]
+            i += 1
+        elif b[j] < a[i]:
+            out[k] = b[j]
+            j += 1
+        else:  # in both: once
+            out[k] = a[i]
+            i += 1
+            j += 1
+        k += 1
+    while i < len(a):
+        out[k] = a[i]
+        i += 1
+        k += 1
+    while j < len(b):
+        out[k] = b[j]
+        j += 1
+        k += 1
+    return out[:k].copy()
