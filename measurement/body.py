@@ -189,7 +189,7 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
     box = second_core().submit(_box, points)
     length_job = second_core().submit(_length, points, stripe, rows, groups, params.min_group)
     # each group's points in their original order (one stable sort instead of a mask per group)
-    order = np.argsort(stripe, kind="stable")
+    order = _stable_order(stripe)
     ks_sorted, ks_arr = stripe[order], np.array(groups)
     first, last = np.searchsorted(ks_sorted, ks_arr), np.searchsorted(ks_sorted, ks_arr, side="right")
     exts, all_ends = _extents(np.asarray(points[order], np.float64), first, last, params.trim)
@@ -205,6 +205,14 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
         out["body_length"] = length
     out["oriented_box_mm"] = box.result()
     return out
+
+
+def _stable_order(stripe: np.ndarray) -> np.ndarray:
+    """``np.argsort(stripe, kind="stable")`` of stripe indices (N,): a counting sort when they are small
+    non-negative integers (as the pipeline's are)."""
+    if len(stripe) and stripe.dtype.kind in "iu" and stripe.min() >= 0 and stripe.max() <= 1_000_000:
+        return _kernels.stable_group_order(stripe.astype(np.int64, copy=False), int(stripe.max()) + 1)
+    return np.argsort(stripe, kind="stable")
 
 
 def _stripe_counts(stripe: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

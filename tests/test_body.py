@@ -241,3 +241,11 @@ def test_compiled_plane_distances_equal_the_numpy_minimum_of_the_planes():
                                         150.0, got_finite, got_d)
         assert np.array_equal(got_finite, finite) and np.array_equal(got_d, d, equal_nan=True)
         assert np.array_equal(near, d[finite][d[finite] <= 150.0])
+
+
+def test_stripe_groups_are_ordered_as_a_stable_argsort_orders_them():
+    from measurement.body import _stable_order
+
+    rng = np.random.default_rng(12)
+    for stripe in (rng.integers(0, 50, 3000), rng.integers(0, 50, 3000).astype(np.int32), np.zeros(0, np.int64)):
+        assert np.array_equal(_stable_order(stripe), np.argsort(stripe, kind="stable"))
