@@ -1,10 +1,12 @@
-"""BLAS threads during a scan.
+"""A scan's threads: the second core, detection's band threads, and BLAS on one thread during a scan.
 
 NumPy's OpenBLAS splits a matrix product over every core once it is large enough (a 10^4-row scatter
 matrix, a 10^5-row point-to-plane product). A scan's products are many and small: the second thread's
 start and its busy wait cost far more than the arithmetic (a background-plane fit took 14.5 ms of CPU
 with two threads, 1.9 ms with one), and on a machine with other work it waits for a core. A scan runs
-its products on one thread; its own parallel parts (detection's bands) are threads of their own.
+its products on one thread; its own parallel parts are threads of their own: detection's bands, and the
+second core, which takes the steps that can run beside the main one (segment linking, halves of large
+compiled loops). Both pools are shared by the scans of a process and restart in a forked child.
 """
 
 from __future__ import annotations
@@ -99,8 +101,8 @@ def _restore_blas() -> None:
 def one_blas_thread() -> Iterator[None]:
     """A context in which the BLAS libraries loaded so far use one thread; the previous counts come back when
     the last of the contexts open at once (scans in several threads) is left. Set and restored on the second
-    core (not to be entered from it). About 0.1 ms; the libraries are looked up once, on the first call
-    (about 1 ms)."""
+    core (so a scan must not itself run as a task of the second core). About 0.1 ms; the libraries are
+    looked up once, on the first call (about 1 ms)."""
     global _controller, _blas_users
     with _blas_lock:
         if _controller is None:
