@@ -25,8 +25,8 @@ def denoise(c: Centres, shape: tuple[int, int]) -> np.ndarray:
     # from the centres within reach of them
     if len(v) < 20_000 or (np.diff(v) < 0).any():
         return _kernels.crowded(v, ui, h, wdt)
-    # a centre in row r counts rows r - wdt // 2 .. r - wdt // 2 + wdt - 1: the centres of rows below mid
-    # need those before row mid - wdt // 2 + wdt, the others those from row mid - wdt // 2 on
+    # a centre in row r counts rows r - wdt // 2 .. r - wdt // 2 + wdt - 1: the centres of the rows before
+    # mid (the upper half) need those before row mid - wdt // 2 + wdt, the others those from mid - wdt // 2
     mid = int(v[len(v) // 2])
     below = int(np.searchsorted(v, mid - wdt // 2))
     above = int(np.searchsorted(v, mid - wdt // 2 + wdt))
