@@ -401,3 +401,28 @@ def test_rays_given_as_a_function_are_looked_up_during_the_linking_and_label_the
     lazy = label_centres(c, lookup, cal.planes, img.shape)
     assert calls == [1]
     assert np.array_equal(lazy.stripe, label_centres(c, rays, cal.planes, img.shape).stripe)
+
+
+def _enforce_row_order_numpy(c, labels, order):
+    lab, v = labels[order], c.v[order]
+    idx = np.nonzero(lab >= 0)[0]
+    same_row = v[idx[1:]] == v[idx[:-1]]
+    bad = same_row & (lab[idx[1:]] <= lab[idx[:-1]])
+    drop = np.zeros(len(lab), bool)
+    drop[idx[1:][bad]] = True
+    drop[idx[:-1][bad]] = True
+    out = labels.copy()
+    out[order[drop]] = -1
+    return out
+
+
+def test_row_order_breaks_drop_both_sides_as_the_numpy_form_does(side):
+    from measurement.matching import _enforce_row_order
+    from measurement.segments import row_order
+
+    _, c, _, _ = side
+    rng = np.random.default_rng(14)
+    labels = np.where(rng.random(len(c)) < 0.2, -1, rng.integers(0, 40, len(c)))  # many inversions
+    order = row_order(c)
+    got = _enforce_row_order(c, labels, order)
+    assert np.array_equal(got, _enforce_row_order_numpy(c, labels, order)) and (got < labels).any()

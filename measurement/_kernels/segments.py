@@ -302,3 +302,21 @@ def segment_row_order(seg, v):
     v_lo = v.min()
     by_row = stable_group_order(v.astype(np.int64) - v_lo, np.int64(v.max()) - v_lo + 1)
     return by_row[stable_group_order(seg[by_row], seg.max() + 1)]
+
+
+@compiled
+def row_order_breaks(order, v, labels):
+    """``matching._enforce_row_order``'s drops (M,) bool: along ``order`` (the centres by row, then column),
+    each pair of consecutive labelled centres (labels (M,) >= 0) in one row (v (M,)) whose labels do not
+    increase marks both."""
+    drop = np.zeros(len(labels), np.bool_)
+    prev = -1
+    for j in range(len(order)):
+        i = order[j]
+        if labels[i] < 0:
+            continue
+        if prev >= 0 and v[prev] == v[i] and labels[i] <= labels[prev]:
+            drop[i] = True
+            drop[prev] = True
+        prev = i
+    return drop
