@@ -532,8 +532,9 @@ _COMPILED_SLOPE = True  # slope growth in one compiled loop (False: the rounds b
 def _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, tol_mm, n, bg_planes=None,
               depth_only=False, gaps=(1, 2, 3), min_share=0.6, slope=False, pairs: _Pairs | None = None) -> None:
     """Grow labels along continuous surfaces until nothing changes (updates ``seg_label`` in place).
-    With ``bg_planes`` a segment only joins when its points then lie on those planes. With ``slope`` (depth only) the neighbour's depth is
-    extrapolated by its own step from the stripe beyond it, so a steep surface keeps growing.
+    With ``bg_planes`` a segment only joins when its points then lie on those planes. With ``slope`` (depth
+    only) the neighbour's depth is extrapolated by its own step from the stripe beyond it, so a steep
+    surface keeps growing.
     ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``, when already known."""
     table = label_table(seg, seg_label)
     pairs = _neighbour_pairs(seg, long_seg, left, right) if pairs is None else pairs

@@ -111,12 +111,11 @@ def _bins_on_planes(rays: np.ndarray, planes: np.ndarray, bins: float, chunk: in
         return _kernels.screened_bins(np.ascontiguousarray(rays[at:at + chunk]), planes, centre, a, bins, 1e-5,
                                       out[at:at + chunk])
 
-    # the chunks are screened on both cores when there are several (each writes its own rows of out); the
-    # unsure bins are then formed exactly, chunk by chunk as before
-    later = second_core().submit(lambda: [screen(at) for at in starts[len(starts) // 2:]]) if len(starts) > 3 else None
-    unsure_all = [screen(at) for at in (starts[:len(starts) // 2] if later is not None else starts)]
-    if later is not None:
-        unsure_all += later.result()
+    # the chunks are screened on both cores when there are several (each writes its own rows of out), the
+    # later half on the second; the unsure bins are then formed exactly, chunk by chunk as before
+    split = len(starts) // 2 if len(starts) > 3 else len(starts)
+    later = second_core().submit(lambda: [screen(at) for at in starts[split:]]) if split < len(starts) else None
+    unsure_all = [screen(at) for at in starts[:split]] + (later.result() if later is not None else [])
     for at, unsure in zip(starts, unsure_all, strict=True):
         k, i = np.divmod(unsure, min(chunk, len(rays) - at))
         if len(i):
