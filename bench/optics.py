@@ -1,6 +1,6 @@
 """Scan robustness to the optics, the sensor and the scene: the same animal and rig geometry with other
-stripe widths, another stripe fan, a noisy sensor, a bright room, a soft camera focus, no wall, a dark
-or a white floor, and frames that went through JPEG compression.
+stripe widths, another stripe fan, a noisy sensor, a bright room, a soft camera focus, no wall, a dark,
+a white, a speckled (concrete) or a tiled floor, and frames that went through JPEG compression.
 
     python bench/optics.py [--size 1536x1024] [--cache /tmp/bodyscan-bench] [--seed 4]
 
@@ -43,6 +43,8 @@ VARIANTS: dict[str, dict] = {
     "no wall": {"scene": {"wall": False}},
     "dark floor (albedo 0.12)": {"scene": {"floor_albedo": 0.12}},
     "white floor (albedo 0.85)": {"scene": {"floor_albedo": 0.85}},
+    "concrete floor (fine speckle)": {"scene": {"floor": "concrete"}},
+    "tiled floor (dark grout)": {"scene": {"floor": "tiles"}},
     "JPEG quality 90": {"jpeg": 90},
     "JPEG quality 75": {"jpeg": 75},
 }

@@ -85,13 +85,34 @@ class MatchingParams:
     denoise: bool = True
 
 
-def main_row_labels(c: Centres, n: int, order: np.ndarray | None = None) -> np.ndarray:
+def main_row_labels(c: Centres, n: int, order: np.ndarray | None = None, weak: np.ndarray | None = None
+                    ) -> np.ndarray:
     """Labels (M,) from rows that show all n stripes, -1 elsewhere: rows holding exactly n evenly spread
     centres, and rows missing up to n // 8 of them where each missing stripe leaves one gap of twice the
     local spacing (a noisy sensor loses the dim stripes of a floor seen at a grazing angle, and then no
-    floor row holds all n). order : row_order(c), if known"""
-    labels = np.full(len(c), -1, np.int64)
+    floor row holds all n). order : row_order(c), if known.
+
+    weak : (M,) bool, centres that are no stripe's full profile (``detection.reliable`` false). A row holding
+    more than n centres is counted again without them: on a patterned floor (tiles with dark grout lines)
+    the edges of each line beside the stripe field are one-sided peaks in every row, and then no row held n
+    centres and the scan was refused."""
     counts = np.bincount(c.v, minlength=int(c.v.max(initial=0)) + 1)
+    labels = _full_rows(c, n, order, counts)
+    if weak is not None and len(c):
+        strong = np.bincount(c.v[~weak], minlength=len(counts))
+        # rows over n that would hold n, or a few fewer, without their weak centres, and have no labels yet
+        again_row = (counts > n) & (strong >= n - n // 8) & (strong <= n)
+        again_row[c.v[labels >= 0]] = False
+        again = np.flatnonzero(again_row[c.v] & ~weak)
+        if len(again):
+            sub = c.take(again)
+            labels[again] = _full_rows(sub, n, None, np.bincount(sub.v, minlength=len(counts)))
+    return labels
+
+
+def _full_rows(c: Centres, n: int, order: np.ndarray | None, counts: np.ndarray) -> np.ndarray:
+    """``main_row_labels`` of all the centres c, with counts = np.bincount(c.v) (at least)."""
+    labels = np.full(len(c), -1, np.int64)
     # the rows of a given count in row order: the frame's row order restricted to them (a stable sort)
     every = row_order(c) if order is None else order
     row_count = counts[c.v[every]]
@@ -202,7 +223,8 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     order = row_order(c)
     linking = second_core().submit(lambda: split_at_changes(c, link_segments(c, link, order)))
     left, right = row_neighbours(c, order)
-    main_rows = main_row_labels(c, n, order)
+    weak = ~reliable(c)
+    main_rows = main_row_labels(c, n, order, weak)
     if callable(rays):
         rays = rays()
     seg = linking.result()

@@ -219,6 +219,28 @@ def test_rows_missing_a_few_stripes_still_give_the_background_its_labels():
     assert (lab[v == 3] == -1).all()
 
 
+def test_rows_with_edge_peaks_beside_the_stripes_are_counted_without_them():
+    """On a tiled floor the dark grout lines outside the stripe field leave one-sided peaks (weak) in every
+    row, so no row holds n centres. Counted without its weak centres a row is labelled; a row whose
+    extra centre is a full stripe profile is not (its count stays over n)."""
+    from measurement.detection import Centres
+    from measurement.matching import main_row_labels
+
+    n = 40
+    u_all = 300.0 + 25.0 * np.arange(n)
+    edges = np.array([40.0, 58.0, 1420.0, 1438.0])  # both edges of two grout lines, left and right of the field
+    rows = {0: (u_all, edges, True), 1: (u_all, edges, False), 2: (u_all, np.array([1420.0]), False)}
+    u = np.concatenate([np.sort(np.r_[a, b]) for a, b, _ in rows.values()])
+    v = np.concatenate([np.full(len(a) + len(b), r, np.int32) for r, (a, b, _) in rows.items()])
+    extra = np.concatenate([np.isin(np.sort(np.r_[a, b]), b) for a, b, _ in rows.values()])
+    weak = extra & np.repeat([w for *_, w in rows.values()], [len(a) + len(b) for a, b, _ in rows.values()])
+    c = Centres(u, v, np.full(len(u), 40.0, np.float32), np.full(len(u), 6.0, np.float32))
+    assert (main_row_labels(c, n) == -1).all()  # no row holds n centres
+    lab = main_row_labels(c, n, weak=weak)
+    assert (lab[(v == 0) & ~extra] == np.arange(n)).all() and (lab[(v == 0) & extra] == -1).all()
+    assert (lab[v != 0] == -1).all()  # extra centres that are full profiles are not set aside
+
+
 def test_a_floor_with_a_tenth_of_the_labels_is_a_background_plane_too():
     """The wall carries most labelled points under noise; the floor's tenth-plus still makes a plane."""
     from measurement.background import background_planes

@@ -70,6 +70,25 @@ def test_paper_definitions_match_the_true_stripe_points(small_capture, truth_cal
     assert len(r.measurements["body_length"]["points"]) == 2
 
 
+def test_a_tiled_floor_is_told_from_the_animal(tmp_path):
+    """Dark grout lines every 150 mm: their edges beside the stripe field are peaks in every row, and the
+    floor used to go unlabelled and join the animal (body height +100 % on this render)."""
+    from measurement.body import measure
+    from measurement.simulate.capture import write_capture
+
+    cap = write_capture(tmp_path / "tiles", size=(1024, 683), seed=4, poses=0, scenes=("side",),
+                        scene={"floor": "tiles"})
+    cal = load_calibration(cap / "truth" / "truth.json")
+    r = scan(read_image(cap / "scan" / "side.png"), cal, "side")
+    t = dict(np.load(cap / "truth" / "side_stripes.npz"))
+    tk, kind = match_crossings(r.scene_uv, t)
+    floor = kind == 2
+    assert np.mean(r.scene_stripe[floor] == tk[floor]) > 0.98
+    on = t["kind"] == 5
+    ref = measure(t["points"][on], t["stripe"][on], np.rint(t["uv"][on, 1]).astype(np.int64), "side")
+    assert r.measurements["body_height_mm"] == pytest.approx(ref["body_height_mm"], rel=0.05)
+
+
 def test_scan_returns_a_contract_shaped_result(small_capture, truth_cal):
     r = scan(read_image(small_capture / "scan" / "side.png"), truth_cal, "side")
     m = r.measurements

@@ -57,10 +57,18 @@ def _noise3(points: np.ndarray, rng_seed: int, waves: int = 7, lo: float = 50, h
     return out / np.sqrt(waves / 2)
 
 
+FLOORS = ("mottled", "concrete", "tiles")
+
+
 def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = True,
-                 floor_albedo: float | None = None) -> tuple[list, np.ndarray, np.ndarray]:
+                 floor_albedo: float | None = None, floor: str = "mottled") -> tuple[list, np.ndarray, np.ndarray]:
     """Surfaces of a scan scene in camera coordinates plus the camera pose (R_cam_world, t_cam_world).
-    ``wall`` : the view's wall, if it has one; ``floor_albedo`` : a uniform floor instead of the mottled one."""
+    ``wall`` : the view's wall, if it has one; ``floor_albedo`` : a uniform floor instead of the mottled one;
+    ``floor`` : the floor's pattern: "mottled" (slow blotches), "concrete" (the blotches plus a fine-grained
+    speckle, 8-80 mm) or "tiles" (150 mm tiles, their 6 mm dark grout lines along the world x and z axes:
+    in a top view the lines across the body run along the stripes)."""
+    if floor not in FLOORS:
+        raise ValueError(f"floor must be one of {', '.join(FLOORS)}, got {floor!r}")
     R, t = look_at(*VIEW_CAMERAS[view])
     to_world = lambda p: (p - t) @ R  # noqa: E731  camera -> world
 
@@ -70,14 +78,23 @@ def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = T
         n = _noise3(to_world(points), seed + 11)
         return np.clip(0.5 + 0.32 * n, 0.12, 0.9)
 
-    def floor(points: np.ndarray) -> np.ndarray:
+    def floor_pattern(points: np.ndarray) -> np.ndarray:
         if floor_albedo is not None:
             return np.full(len(points), floor_albedo)
-        return 0.38 + 0.08 * _noise3(to_world(points), seed + 5, 5, 80, 400)
+        world = to_world(points)
+        out = 0.38 + 0.08 * _noise3(world, seed + 5, 5, 80, 400)
+        if floor == "concrete":
+            out += 0.06 * _noise3(world, seed + 105, 60, 8, 80)
+        elif floor == "tiles":
+            grout = np.zeros(len(points), bool)
+            for axis in (0, 2):
+                grout |= np.abs(np.mod(world[:, axis], 150.0) - 75.0) > 72.0
+            out[grout] = 0.1
+        return np.clip(out, 0.02, 1.0)
 
     surfaces: list = [MeshSurface(animal.vertices @ R.T + t, animal.faces, "animal", fur_albedo)]
     n_floor = R @ np.array([0.0, 1.0, 0.0])
-    surfaces.append(PlaneSurface(n_floor, float(n_floor @ t), "floor", floor))
+    surfaces.append(PlaneSurface(n_floor, float(n_floor @ t), "floor", floor_pattern))
     if wall and view in WALLS:
         nw, off = WALLS[view]
         n_wall = R @ np.asarray(nw, float)
@@ -101,7 +118,7 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
     defects : {pose number (1-based): "no_board" | "no_stripes"} renders deliberately unusable poses.
     light   : overrides of Lighting fields for every exposure (e.g. {"read_noise": 4.0, "gain": 0.8}),
               plus "stripe_ambient" to set the room light of the calibration stripe images.
-    scene   : options of the animal views' scene (``animal_scene``: "wall", "floor_albedo").
+    scene   : options of the animal views' scene (``animal_scene``: "wall", "floor_albedo", "floor").
     """
     light = dict(light or {})
     stripe_ambient = light.pop("stripe_ambient", None)
