@@ -52,6 +52,25 @@ def test_isolation_drops_the_floor_and_stray_clusters():
     assert keep[: len(pts)].all() and not keep[len(pts):].any()
 
 
+def test_isolation_passes_over_a_larger_box_for_the_curved_animal():
+    """A feed box beside the animal can hold more points than the animal: the largest cluster that does
+    not lie on three planes is kept."""
+    from measurement.body import planar_share
+
+    rng = np.random.default_rng(1)
+    animal, _, _ = _barrel(length=300.0, radius=80.0, n_stripes=15, rows=60)  # 900 points
+    faces = [np.column_stack([rng.uniform(0, 260, 700), rng.uniform(-90, 90, 700), np.full(700, 1000.0)]),
+             np.column_stack([np.full(500, 260.0), rng.uniform(-90, 90, 500), rng.uniform(1000, 1220, 500)]),
+             np.column_stack([rng.uniform(0, 260, 500), np.full(500, -90.0), rng.uniform(1000, 1220, 500)])]
+    box = np.vstack(faces) + np.array([600.0, 0.0, 0.0])  # 1700 points, 300 mm away from the animal
+    pts = np.vstack([animal, box]) + rng.normal(0, 0.3, (len(animal) + len(box), 3))
+    assert planar_share(pts[len(animal):]) > 0.95 and planar_share(pts[:len(animal)]) < 0.6
+    keep = isolate(pts, None)
+    assert keep[:len(animal)].all() and not keep[len(animal):].any()
+    # no box beside it: the largest cluster, as before
+    assert isolate(pts[:len(animal)], None).all()
+
+
 def test_isolation_keeps_a_foot_down_to_a_few_noise_widths_above_the_floor():
     pts, _, _ = _barrel()
     leg = np.column_stack([np.full(200, 200.0), np.linspace(-100.0, -150.0, 200), np.full(200, 1200.0)])

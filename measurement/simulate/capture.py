@@ -61,12 +61,14 @@ FLOORS = ("mottled", "concrete", "tiles")
 
 
 def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = True,
-                 floor_albedo: float | None = None, floor: str = "mottled") -> tuple[list, np.ndarray, np.ndarray]:
+                 floor_albedo: float | None = None, floor: str = "mottled",
+                 box: tuple[float, float] | None = None) -> tuple[list, np.ndarray, np.ndarray]:
     """Surfaces of a scan scene in camera coordinates plus the camera pose (R_cam_world, t_cam_world).
     ``wall`` : the view's wall, if it has one; ``floor_albedo`` : a uniform floor instead of the mottled one;
     ``floor`` : the floor's pattern: "mottled" (slow blotches), "concrete" (the blotches plus a fine-grained
     speckle, 8-80 mm) or "tiles" (150 mm tiles, their 6 mm dark grout lines along the world x and z axes:
-    in a top view the lines across the body run along the stripes)."""
+    in a top view the lines across the body run along the stripes); ``box`` : (x, z) world mm of the centre
+    of a feed box on the floor, 260 x 180 x 220 mm (x, height, z), kind "background"."""
     if floor not in FLOORS:
         raise ValueError(f"floor must be one of {', '.join(FLOORS)}, got {floor!r}")
     R, t = look_at(*VIEW_CAMERAS[view])
@@ -100,6 +102,11 @@ def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = T
         n_wall = R @ np.asarray(nw, float)
         surfaces.append(PlaneSurface(n_wall, float(off + n_wall @ t), "wall",
                                      lambda p: 0.58 + 0.04 * _noise3(to_world(p), seed + 7, 4, 200, 800)))
+    if box is not None:
+        crate = trimesh.creation.box((260.0, 180.0, 220.0))
+        v = crate.vertices + np.array([box[0], 90.0, box[1]])
+        surfaces.append(MeshSurface(v @ R.T + t, np.asarray(crate.faces), "background",
+                                    lambda p: np.full(len(p), 0.5)))
     return surfaces, R, t
 
 
@@ -118,7 +125,7 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
     defects : {pose number (1-based): "no_board" | "no_stripes"} renders deliberately unusable poses.
     light   : overrides of Lighting fields for every exposure (e.g. {"read_noise": 4.0, "gain": 0.8}),
               plus "stripe_ambient" to set the room light of the calibration stripe images.
-    scene   : options of the animal views' scene (``animal_scene``: "wall", "floor_albedo", "floor").
+    scene   : options of the animal views' scene (``animal_scene``: "wall", "floor_albedo", "floor", "box").
     """
     light = dict(light or {})
     stripe_ambient = light.pop("stripe_ambient", None)
