@@ -114,13 +114,28 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     meas["centres"] = int(len(centres))
     meas["scene_point_count"] = int(len(pts))
     meas["unplaced_share"] = round(labels.unplaced / labels.pieces, 4) if labels.pieces else 0.0
+    # how bright the stripes on the animal stand above their surroundings (8-bit gray levels; not read off
+    # the few stray points left when the animal could not be placed)
+    on_animal = idx[animal]
+    meas["animal_contrast"] = (round(float(np.median(centres.contrast.take(on_animal))), 1)
+                               if len(on_animal) >= 200 else None)
     meas["warnings"] = _warnings(meas, labels)
     return ScanResult(animal_pts, animal_stripe, uv[animal], pts, stripe, uv, meas, timings)
+
+
+FAINT_ANIMAL = 25.0  # gray levels: the animal's stripes' median contrast under which a scan is warned about
 
 
 def _warnings(meas: dict, labels: Labels) -> list[str]:
     """What a technician should know before trusting the numbers."""
     out = []
+    contrast = meas.get("animal_contrast")
+    if contrast is not None and contrast < FAINT_ANIMAL:
+        out.append(f"the stripes on the animal are faint (median {contrast:.0f} gray levels above their "
+                   "surroundings; 30-70 is usual): a dark coat loses the stripes at its outline, so the body "
+                   "measures short and, seen from above, its stripe indices may be off by a stripe or more, "
+                   "which moves the whole cloud in depth: raise the exposure or the projector's brightness "
+                   "and scan again")
     if labels.pieces and labels.unplaced > 0.3 * labels.pieces:
         out.append(f"{100 * labels.unplaced / labels.pieces:.0f} % of the stripe light on the animal could not be "
                    "matched to a light plane (nothing in the image fixed which stripe it was), so those parts "

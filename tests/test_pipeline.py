@@ -167,6 +167,19 @@ def test_a_faint_shadow_reading_is_named_in_the_warnings():
     assert len(warned) == 1 and "faint shadow" in warned[0] and "off by one stripe" in warned[0]
 
 
+def test_faint_stripes_on_a_dark_coat_are_named_in_the_warnings(small_capture, truth_cal):
+    """A black coat (stripe contrast about 17 gray levels against 30-70 on the usual renders) loses its
+    outline and, from above, its placement: the scan says so. The small capture's own coat does not warn."""
+    from measurement.matching import Labels
+    from measurement.pipeline import _warnings
+
+    r = scan(read_image(small_capture / "scan" / "side.png"), truth_cal, "side")
+    assert r.measurements["animal_contrast"] > 30 and not any("faint (" in w for w in r.measurements["warnings"])
+    meas = {"body_length_mm": 500.0, "body_height_mm": 280.0, "animal_contrast": 17.0}
+    warned = _warnings(meas, Labels(np.zeros(3, np.int64), None, None, 100, 0))
+    assert len(warned) == 1 and "stripes on the animal are faint (median 17 gray levels" in warned[0]
+
+
 def test_sixteen_bit_and_colour_frames_scan_as_their_eight_bit_gray(small_capture, truth_cal):
     """A 16-bit camera frame (the same light, x257) or a 3-channel one gives the same cloud."""
     img = read_image(small_capture / "scan" / "side.png")
