@@ -62,13 +62,14 @@ FLOORS = ("mottled", "concrete", "tiles")
 
 def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = True,
                  floor_albedo: float | None = None, floor: str = "mottled",
-                 box: tuple[float, float] | None = None) -> tuple[list, np.ndarray, np.ndarray]:
+                 box: tuple[float, float] | None = None, coat: float = 1.0) -> tuple[list, np.ndarray, np.ndarray]:
     """Surfaces of a scan scene in camera coordinates plus the camera pose (R_cam_world, t_cam_world).
     ``wall`` : the view's wall, if it has one; ``floor_albedo`` : a uniform floor instead of the mottled one;
     ``floor`` : the floor's pattern: "mottled" (slow blotches), "concrete" (the blotches plus a fine-grained
     speckle, 8-80 mm) or "tiles" (150 mm tiles, their 6 mm dark grout lines along the world x and z axes:
     in a top view the lines across the body run along the stripes); ``box`` : (x, z) world mm of the centre
-    of a feed box on the floor, 260 x 180 x 220 mm (x, height, z), kind "background"."""
+    of a feed box on the floor, 260 x 180 x 220 mm (x, height, z), kind "background"; ``coat`` scales the
+    animal's albedo (0.25: a black coat, 0.03-0.22 with fur)."""
     if floor not in FLOORS:
         raise ValueError(f"floor must be one of {', '.join(FLOORS)}, got {floor!r}")
     R, t = look_at(*VIEW_CAMERAS[view])
@@ -76,9 +77,9 @@ def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = T
 
     def fur_albedo(points: np.ndarray) -> np.ndarray:
         if not fur:
-            return np.full(len(points), 0.62)
+            return np.full(len(points), 0.62 * coat)
         n = _noise3(to_world(points), seed + 11)
-        return np.clip(0.5 + 0.32 * n, 0.12, 0.9)
+        return np.clip(0.5 + 0.32 * n, 0.12, 0.9) * coat
 
     def floor_pattern(points: np.ndarray) -> np.ndarray:
         if floor_albedo is not None:
@@ -125,7 +126,8 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
     defects : {pose number (1-based): "no_board" | "no_stripes"} renders deliberately unusable poses.
     light   : overrides of Lighting fields for every exposure (e.g. {"read_noise": 4.0, "gain": 0.8}),
               plus "stripe_ambient" to set the room light of the calibration stripe images.
-    scene   : options of the animal views' scene (``animal_scene``: "wall", "floor_albedo", "floor", "box").
+    scene   : options of the animal views' scene (``animal_scene``: "wall", "floor_albedo", "floor", "box",
+              "coat").
     """
     light = dict(light or {})
     stripe_ambient = light.pop("stripe_ambient", None)
