@@ -1,6 +1,7 @@
 """Scan pipeline accuracy and speed on the rig simulator (full resolution by default).
 
     python bench/scan.py [--size 3072x2048] [--cache DIR] [--repeats 7] [--configs 40-fur,40-clean,50-fur] [--ambient]
+                         [--calibrated]
 
 For each configuration (stripe count, fur or clean) and view (side, top): stripe-label correctness
 against the simulator's exact plane crossings, the share of animal points within 2 mm of the true
@@ -8,7 +9,9 @@ surface and their RMS, body length / height against the same definitions applied
 true stripe points, and the anatomy (torso length) beside them. Then the median time of
 `measurement.scan` on one decoded frame, and the same as ratios to one 5x5 GaussianBlur over the frame
 (our floor) and to a literal per-pixel Python Algorithm 2 on a crop (the paper's baseline), measured
-side by side in this run. Uses the simulator's true calibration, so the figures are the scan's own.
+side by side in this run. Uses the simulator's true calibration, so the figures are the scan's own;
+with --calibrated, the calibration `calibrate` makes from 12 rendered chessboard poses of the same rig
+(seed 11, cached beside the views): the chain a user runs.
 """
 
 from __future__ import annotations
@@ -41,9 +44,25 @@ def capture_for(cache: Path, stripes: int, fur: bool, size: tuple[int, int], see
     return cached_capture(cache / f"scan-{size[0]}x{size[1]}-{stripes}-{'fur' if fur else 'clean'}-{seed}",
                           stripes=stripes, size=size, seed=seed, fur=fur)
 
-def evaluate(cap: Path, view: str, ambient: bool = False) -> dict:
-    """The figures of one view; with ``ambient``, scanned with its stripes-off image too."""
-    cal = load_calibration(cap / "truth" / "truth.json")
+def calibrated_for(cache: Path, stripes: int, size: tuple[int, int], poses: int = 12, seed: int = 11):
+    """The calibration ``calibrate`` makes from ``poses`` chessboard poses of the bench's rig (rendered into
+    the cache once)."""
+    from measurement.calibration import calibrate
+    from measurement.capture import read_capture
+    from measurement.simulate.capture import write_capture
+
+    cap = cache / f"calib-{size[0]}x{size[1]}-{stripes}-{poses}-{seed}"
+    if not (cap / "truth" / "truth.json").exists():
+        write_capture(cap, stripes=stripes, size=size, seed=seed, scenes=(), poses=poses)
+    result = calibrate(read_capture(cap))
+    print(f"  calibrated {cap.name}: E1 {result.reprojection_error_px:.3f} px", flush=True)
+    return load_calibration(result.to_dict())
+
+
+def evaluate(cap: Path, view: str, ambient: bool = False, cal=None) -> dict:
+    """The figures of one view; with ``ambient``, scanned with its stripes-off image too; ``cal`` : the
+    calibration to scan with (default: the simulator's true one)."""
+    cal = cal or load_calibration(cap / "truth" / "truth.json")
     info = json.loads((cap / "truth" / "truth.json").read_text())["views"][view]
     img = read_image(cap / "scan" / f"{view}.png")
     r = scan(img, cal, view, ambient=read_image(cap / "scan" / f"{view}_ambient.png") if ambient else None)
@@ -128,6 +147,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=4)
     ap.add_argument("--configs", default="40-fur,40-clean,50-fur,50-clean")
     ap.add_argument("--ambient", action="store_true", help="scan with each view's ambient (stripes off) image too")
+    ap.add_argument("--calibrated", action="store_true",
+                    help="scan with the calibration made from rendered chessboard poses, not the true one")
     args = ap.parse_args()
     size = tuple(int(v) for v in args.size.split("x"))
     cache = Path(args.cache)
@@ -139,8 +160,9 @@ def main() -> None:
         stripes, kind = cfg.split("-")
         cap = capture_for(cache, int(stripes), kind == "fur", size, args.seed)
         first = first or cap
+        cal = calibrated_for(cache, int(stripes), size) if args.calibrated else None
         for view in ("side", "top"):
-            e = evaluate(cap, view, args.ambient)
+            e = evaluate(cap, view, args.ambient, cal)
             print(f"{cfg:10s} {view:4s} {e['animal_points']:7d}/{e['animal_truth_crossings']:<6d} "
                   f"{e['animal_label_right']:8.2%} / {e['background_label_right']:7.3%}   "
                   f"{e['within_2mm']:9.2%}  {e['rms_within_mm']:6.3f}  "
