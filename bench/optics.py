@@ -1,7 +1,7 @@
 """Scan robustness to the optics, the sensor and the scene: the same animal and rig geometry with other
 stripe widths, another stripe fan, a noisy sensor, a bright room, a soft camera focus, no wall, a dark,
-a white, a speckled (concrete) or a tiled floor, a feed box behind the animal, a black coat, and frames
-that went through JPEG compression.
+a white, a speckled (concrete) or a tiled floor, a feed box behind the animal, a black coat, a weighing
+platform under the animal, and frames that went through JPEG compression.
 
     python bench/optics.py [--size 1536x1024] [--cache /tmp/bodyscan-bench] [--seed 4]
 
@@ -48,6 +48,7 @@ VARIANTS: dict[str, dict] = {
     "tiled floor (dark grout)": {"scene": {"floor": "tiles"}},
     "feed box behind the animal": {"scene": {"box": (0.0, 250.0)}},
     "black coat (albedo x0.25)": {"scene": {"coat": 0.25}},
+    "weighing platform (100 mm)": {"scene": {"platform": 100.0}},
     "JPEG quality 90": {"jpeg": 90},
     "JPEG quality 75": {"jpeg": 75},
 }

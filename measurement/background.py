@@ -3,6 +3,8 @@ stripe one index puts on them."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from . import _kernels
@@ -12,10 +14,11 @@ from .triangulation import depth_for_labels, intersect
 
 
 def background_planes(rays: np.ndarray, planes: np.ndarray, labels: np.ndarray, tol_mm: float = 8.0,
-                       max_planes: int = 2, first_share: float = 0.2, next_share: float = 0.1) -> np.ndarray | None:
+                       max_planes: int = 4, first_share: float = 0.2, next_share: float = 0.1) -> np.ndarray | None:
     """The dominant planes (floor, wall) of the labelled cloud, (P, 4); None when no plane carries
     ``first_share`` of it (no planar background to separate from). A further plane needs ``next_share``:
-    with a noisy sensor the floor's rows are labelled far less often than the wall's."""
+    with a noisy sensor the floor's rows are labelled far less often than the wall's. Up to four: a
+    weighing platform adds its front and its top to the wall and the floor."""
     from .planes import fit_plane_robust
 
     idx = np.nonzero(labels >= 0)[0]
@@ -27,7 +30,8 @@ def background_planes(rays: np.ndarray, planes: np.ndarray, labels: np.ndarray, 
     rng = np.random.default_rng(0)
     for _ in range(max_planes):
         cand = np.nonzero(rest)[0]
-        if len(cand) < 200:
+        # too few left for the share a plane needs: no fit could be kept
+        if len(cand) < max(200, (next_share if found else first_share) * len(idx)):
             break
         sub = pts if len(cand) == len(pts) else pts.take(cand, axis=0)
         plane, _ = fit_plane_robust(sub, rng, iterations=300, inlier_mm=tol_mm / 2, exact=False, refine_points=16384)
@@ -37,6 +41,60 @@ def background_planes(rays: np.ndarray, planes: np.ndarray, labels: np.ndarray, 
         found.append(plane)
         rest &= ~near
     return np.array(found) if found else None
+
+
+@dataclass(frozen=True, eq=False)
+class Footprints:
+    """Where each background plane was seen: cells (P, H, W) bool of a grid over the viewing rays (z = 1),
+    ``cell`` wide from ``origin`` (x, y). The planes are unbounded, the surfaces are not: the front of a
+    weighing platform is a plane parallel to the wall, and the animal standing on the platform lies
+    behind that plane but nowhere behind the platform."""
+
+    cells: np.ndarray
+    origin: tuple[float, float]
+    cell: float
+
+    def covers(self, rays: np.ndarray) -> np.ndarray:
+        """(K, P) bool: whether each ray (K, 3) falls where plane p was seen."""
+        ix = np.floor((rays[:, 0] - self.origin[0]) / self.cell).astype(np.int64)
+        iy = np.floor((rays[:, 1] - self.origin[1]) / self.cell).astype(np.int64)
+        _, h, w = self.cells.shape
+        inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
+        out = np.zeros((len(rays), len(self.cells)), bool)
+        out[inside] = self.cells[:, iy[inside], ix[inside]].T
+        return out
+
+
+def background_footprints(rays: np.ndarray, planes: np.ndarray, labels: np.ndarray, bg_planes: np.ndarray,
+                          tol_mm: float = 8.0, cell: float = 0.01, every: int = 4,
+                          parallel_cos: float = 0.98) -> Footprints | None:
+    """``Footprints`` of the background planes (P, 4), or None when every plane is unbounded. A plane with
+    a parallel one farther from the camera (the front or the top of a platform before the wall or above
+    the floor) is a bounded surface: the grid cells (``cell`` in ray units, about 30 px at 3072 px)
+    holding a labelled centre (every ``every``-th) within ``tol_mm`` of it, and their neighbours. The
+    farthest of each parallel set (the wall, the floor) covers everything: a noisy sensor labels only some
+    rows of the floor, and the feet must still not sink through it."""
+    from scipy import ndimage
+
+    dist = np.abs(bg_planes[:, 3])  # the camera's distance from each plane (|n| = 1)
+    cos = np.abs(bg_planes[:, :3] @ bg_planes[:, :3].T)
+    bounded = ((cos > parallel_cos) & (dist[None, :] > dist[:, None])).any(axis=1)
+    if not bounded.any():
+        return None
+    lo, hi = rays[:, :2].min(axis=0), rays[:, :2].max(axis=0)
+    w, h = (int(v) + 1 for v in np.floor((hi - lo) / cell))
+    cells = np.ones((len(bg_planes), h, w), bool)
+    idx = np.flatnonzero(labels >= 0)[::every]
+    d = np.abs(intersect(rays.take(idx, axis=0), planes.take(labels[idx], axis=0)) @ bg_planes[:, :3].T
+               - bg_planes[:, 3])
+    ix = np.floor((rays[idx, 0] - lo[0]) / cell).astype(np.int64)
+    iy = np.floor((rays[idx, 1] - lo[1]) / cell).astype(np.int64)
+    for p in np.flatnonzero(bounded):
+        seen = np.zeros((h, w), bool)
+        on = d[:, p] < tol_mm
+        seen[iy[on], ix[on]] = True
+        cells[p] = ndimage.binary_dilation(seen, np.ones((3, 3), bool))
+    return Footprints(cells, (float(lo[0]), float(lo[1])), cell)
 
 
 def near_planes(points: np.ndarray, bg_planes: np.ndarray, tol_mm: float = 8.0) -> np.ndarray:

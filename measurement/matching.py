@@ -26,6 +26,7 @@ import numpy as np
 
 from . import _kernels
 from .background import (
+    background_footprints,
     background_like,
     background_planes,
     claim_background,
@@ -235,6 +236,9 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     # 2: a stripe that continued across the animal's outline in the image carried a background index
     # onto the animal; such centres sit off the background surfaces: cut them off as foreground
     bg_planes = background_planes(rays, planes, labels)
+    # where each plane was seen, from the complete rows' labels (growth can carry a wrong index onto a
+    # parallel plane, e.g. the wall between the legs onto the front of a platform)
+    footprint = background_footprints(rays, planes, labels, bg_planes) if bg_planes is not None else None
     if bg_planes is not None:
         on_bg = near_planes(intersect(rays, planes.take(np.clip(labels, 0, n - 1), axis=0)), bg_planes) & (labels >= 0)
         off_bg = foreground_mask(c, seg, labels, on_bg)
@@ -260,7 +264,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     bg_lit = lit_cells(rays, planes, bg_cl, np.flatnonzero(bg_cl >= 0))
     fg_labels, small, cl, lit, first, shallow = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol,
                                                    n, weighed, params.depth_range_mm, bg_planes, bg_lit,
-                                                   pairs, table)
+                                                   pairs, table, footprint)
     if fg_labels:
         # pieces of the animal without shadow evidence of their own continue a labelled piece's surface
         is_bg = np.zeros(seg.max() + 1, bool)
@@ -283,7 +287,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     if fg_labels and first is not None and not shallow:
         fg = {s: k for s, k in seg_label.items() if s not in bg_labels}
         shift = _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg, fg_mask, fg_pairs, long_seg, left,
-                                    right, tol, n, bg_planes, first, table)
+                                    right, tol, n, bg_planes, first, table, footprint=footprint)
         if shift:
             seg_label = {**bg_labels, **{s: k + shift for s, k in fg.items() if 0 <= k + shift < n}}
             if _TRACE is not None:  # (no centres, no relative labels, the shift of every animal label)
@@ -297,7 +301,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
 
 
 def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, weighed, zrange,
-                bg_planes, bg_lit, pairs: _Pairs, table: BinTable
+                bg_planes, bg_lit, pairs: _Pairs, table: BinTable, footprint=None
                 ) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None, bool]:
     """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
     (M,) the centres of every piece that was weighed for an offset. ``bg_lit`` : the projector cells lit
@@ -332,7 +336,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         reading: dict = {}
         off = occlusion_offset(rays, planes, cl, rel[seg], idx, n, projector_right(planes), background=bg_planes,
                                beside_placed=len(idx) < placed_max, lit=lit, table=table, shallow=True,
-                               report=reading)
+                               report=reading, footprint=footprint)
         if _TRACE is not None:
             _TRACE.append((idx, rel[seg[idx]], off))
         if off is None:
@@ -383,8 +387,8 @@ def _pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pair
 
 
 def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask, fg_pairs, long_seg, left, right, tol, n,
-                        bg_planes, first, table: BinTable, max_behind: float = 0.001, evidence_share: float = 0.6
-                        ) -> int:
+                        bg_planes, first, table: BinTable, max_behind: float = 0.001, evidence_share: float = 0.6,
+                        footprint=None) -> int:
     """Stripes (0 or a shift away from the conflicts) by which to move every animal label in ``fg_labels``
     (segment -> label), from the conflict curve of all of them together against the background's labels
     ``bg_cl`` (M,) and the cells they light ``bg_lit``; ``fg_pairs`` : the ``_neighbour_pairs`` of ``fg_mask``;
@@ -411,7 +415,8 @@ def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask,
     shift = occlusion_offset(rays, planes, bg_cl, r, idx, n, right_side, lit=bg_lit, table=table)
     if not shift or (shift > 0) != right_side:
         return 0
-    if bg_planes is not None and behind_background(rays, planes, r, first, n, bg_planes, shift) > max_behind:
+    if bg_planes is not None and behind_background(rays, planes, r, first, n, bg_planes, shift,
+                                                   footprint=footprint) > max_behind:
         return 0
     return int(shift)
 

@@ -174,8 +174,8 @@ def _thinned(idx: np.ndarray, most: int = 20000) -> np.ndarray:
 def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, bins: float = 0.002,
                       residue: float = 0.5, pattern_edge: float = 0.02, beside_placed: bool = False,
                       lit: np.ndarray | None = None, background: np.ndarray | None = None,
-                      table: BinTable | None = None, shallow: bool = False, report: dict | None = None
-                      ) -> int | None:
+                      table: BinTable | None = None, shallow: bool = False, report: dict | None = None,
+                      footprint=None) -> int | None:
     """Absolute offset of a cluster with relative labels ``r[idx]``, from the projector's point of view.
 
     A background point lit by stripe k at projector elevation e proves that nothing stood in front of it
@@ -196,7 +196,7 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
     With the ``background`` planes (P, 4) the other physical bound joins in for the first piece: no part
     of the animal lies behind the floor or the wall (``behind_background``). Sliding a piece one stripe
     away from its conflicts moves it deeper, and its feet then sink through the floor; the ramp reading
-    never stops at such an offset.
+    never stops at such an offset. ``footprint`` : where each plane was seen (``background_footprints``).
     """
     curve = conflict_curve(rays, planes, cl, r, idx, n, bins, lit, table)
     if curve is None:
@@ -206,15 +206,16 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
     behind = None
     if background is not None and not beside_placed:
         def behind(off: int) -> float:
-            return behind_background(rays, planes, r, idx, n, background, off)
+            return behind_background(rays, planes, r, idx, n, background, off, footprint=footprint)
     return choose_offset(*curve, projector_right, pattern_edge, beside_placed, residue, behind=behind,
                          shallow=shallow, report=report)
 
 
-def behind_background(rays, planes, r, idx, n, background: np.ndarray, off: int, margin_mm: float = 8.0
-                      ) -> float:
+def behind_background(rays, planes, r, idx, n, background: np.ndarray, off: int, margin_mm: float = 8.0,
+                      footprint=None) -> float:
     """The share of the piece (relative labels ``r[idx]``) that offset ``off`` puts more than
-    ``margin_mm`` behind a background plane (P, 4), on the side away from the camera."""
+    ``margin_mm`` behind a background plane (P, 4), on the side away from the camera; with ``footprint``
+    (``background.Footprints``) only behind the part of a plane that was seen."""
     sub = _thinned(idx)
     k = r[sub] + off
     inside = (k >= 0) & (k < n)
@@ -223,7 +224,10 @@ def behind_background(rays, planes, r, idx, n, background: np.ndarray, off: int,
     p = intersect(rays.take(sub[inside], axis=0), planes.take(k[inside], axis=0))
     camera_side = np.where(background[:, 3] <= 0, 1.0, -1.0)  # the sign of n.x - d at the camera (x = 0)
     depth = (p @ background[:, :3].T - background[:, 3]) * camera_side  # (K, P), > 0 on the camera's side
-    return float((depth < -margin_mm).any(axis=1).mean())
+    behind = depth < -margin_mm
+    if footprint is not None:
+        behind &= footprint.covers(rays.take(sub[inside], axis=0))
+    return float(behind.any(axis=1).mean())
 
 
 def lit_cells(rays, planes, labels, which, bins: float = 0.002) -> np.ndarray:

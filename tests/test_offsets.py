@@ -161,6 +161,35 @@ def test_a_plate_pushed_deeper_sinks_behind_the_wall():
     assert share[k_min + 5] == 1.0
 
 
+def test_only_the_seen_part_of_a_nearer_parallel_plane_bounds_the_piece():
+    """A platform's front (a plane parallel to the wall, 200 mm nearer, seen only in a band below the
+    plate) does not push the plate forward: the plate lies behind that plane but not behind the part of it
+    that was seen. The wall, the farthest of the two, still bounds the plate everywhere."""
+    from measurement.background import background_footprints
+    from measurement.offsets import behind_background
+
+    planes, rays, cl, idx, true = _scene(-60.0, 60.0)
+    k_min = int(true[idx].min())
+    r = np.zeros(len(rays), np.int64)
+    r[idx] = true[idx] - k_min
+    front_z = PLATE_Z - 150.0  # the platform's front, nearer than the plate (whose true depth is 1100)
+    band = []  # its stripes, seen in a band of 60 mm below the plate only
+    for k in range(N):
+        band.append(_on_stripe(planes, k, front_z, np.arange(HALF_H + 40.0, HALF_H + 100.0, 2.0)))
+    band = np.vstack(band)
+    rays_all = np.vstack([rays, band / band[:, 2:3]])
+    labels = np.concatenate([cl, np.repeat(np.arange(N), len(band) // N)])
+    r_all = np.concatenate([r, np.zeros(len(band), np.int64)])
+    bg = np.array([[0.0, 0.0, 1.0, WALL_Z], [0.0, 0.0, 1.0, front_z]])
+    fp = background_footprints(rays_all, planes, labels, bg)
+    assert fp is not None and fp.cells[0].all() and not fp.cells[1].all()  # the wall unbounded, the front seen
+    assert background_footprints(rays_all, planes, labels, bg[:1]) is None  # a wall alone bounds everything
+    unbounded = behind_background(rays_all, planes, r_all, idx, N, bg, k_min)
+    bounded = behind_background(rays_all, planes, r_all, idx, N, bg, k_min, footprint=fp)
+    assert unbounded == 1.0 and bounded == 0.0
+    assert behind_background(rays_all, planes, r_all, idx, N, bg, k_min + 5, footprint=fp) == 1.0  # the wall
+
+
 def test_a_bump_on_the_flat_side_does_not_hold_the_reading_away_from_the_ramp():
     """A noisy sensor's curve (a side view with 3x the read noise): the ramp ends at 27, and a bump at 29
     over the tolerance lies between it and the minimum at 32. The first tolerated offset coming up the

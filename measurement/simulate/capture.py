@@ -62,14 +62,16 @@ FLOORS = ("mottled", "concrete", "tiles")
 
 def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = True,
                  floor_albedo: float | None = None, floor: str = "mottled",
-                 box: tuple[float, float] | None = None, coat: float = 1.0) -> tuple[list, np.ndarray, np.ndarray]:
+                 box: tuple[float, float] | None = None, coat: float = 1.0,
+                 platform: float | None = None) -> tuple[list, np.ndarray, np.ndarray]:
     """Surfaces of a scan scene in camera coordinates plus the camera pose (R_cam_world, t_cam_world).
     ``wall`` : the view's wall, if it has one; ``floor_albedo`` : a uniform floor instead of the mottled one;
     ``floor`` : the floor's pattern: "mottled" (slow blotches), "concrete" (the blotches plus a fine-grained
     speckle, 8-80 mm) or "tiles" (150 mm tiles, their 6 mm dark grout lines along the world x and z axes:
     in a top view the lines across the body run along the stripes); ``box`` : (x, z) world mm of the centre
     of a feed box on the floor, 260 x 180 x 220 mm (x, height, z), kind "background"; ``coat`` scales the
-    animal's albedo (0.25: a black coat, 0.03-0.22 with fur)."""
+    animal's albedo (0.25: a black coat, 0.03-0.22 with fur); ``platform`` : the animal stands on a weighing
+    platform this many mm high (900 x 450 mm, kind "background"), its front parallel to the side view's wall."""
     if floor not in FLOORS:
         raise ValueError(f"floor must be one of {', '.join(FLOORS)}, got {floor!r}")
     R, t = look_at(*VIEW_CAMERAS[view])
@@ -95,7 +97,8 @@ def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = T
             out[grout] = 0.1
         return np.clip(out, 0.02, 1.0)
 
-    surfaces: list = [MeshSurface(animal.vertices @ R.T + t, animal.faces, "animal", fur_albedo)]
+    lift = np.array([0.0, platform or 0.0, 0.0])
+    surfaces: list = [MeshSurface((animal.vertices + lift) @ R.T + t, animal.faces, "animal", fur_albedo)]
     n_floor = R @ np.array([0.0, 1.0, 0.0])
     surfaces.append(PlaneSurface(n_floor, float(n_floor @ t), "floor", floor_pattern))
     if wall and view in WALLS:
@@ -103,6 +106,11 @@ def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = T
         n_wall = R @ np.asarray(nw, float)
         surfaces.append(PlaneSurface(n_wall, float(off + n_wall @ t), "wall",
                                      lambda p: 0.58 + 0.04 * _noise3(to_world(p), seed + 7, 4, 200, 800)))
+    if platform:
+        deck = trimesh.creation.box((900.0, platform, 450.0))
+        v = deck.vertices + np.array([-30.0, platform / 2, 0.0])
+        surfaces.append(MeshSurface(v @ R.T + t, np.asarray(deck.faces), "background",
+                                    lambda p: np.full(len(p), 0.45)))
     if box is not None:
         crate = trimesh.creation.box((260.0, 180.0, 220.0))
         v = crate.vertices + np.array([box[0], 90.0, box[1]])
@@ -127,7 +135,7 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
     light   : overrides of Lighting fields for every exposure (e.g. {"read_noise": 4.0, "gain": 0.8}),
               plus "stripe_ambient" to set the room light of the calibration stripe images.
     scene   : options of the animal views' scene (``animal_scene``: "wall", "floor_albedo", "floor", "box",
-              "coat").
+              "coat", "platform").
     """
     light = dict(light or {})
     stripe_ambient = light.pop("stripe_ambient", None)
@@ -183,8 +191,9 @@ def _write_view(out: Path, view: str, animal: Animal, rig: Rig, rays_xy: np.ndar
     np.savez_compressed(out / "truth" / f"{view}_stripes.npz", **st)  # type: ignore[arg-type]
     mesh_cam = surfaces[0]
     trimesh.Trimesh(mesh_cam.vertices, mesh_cam.faces, process=False).export(out / "truth" / f"{view}_animal.ply")
+    lifted = t + R @ np.array([0.0, scene.get("platform") or 0.0, 0.0])  # the animal on a platform, if any
     truth["views"][view] = {"R_cam_world": R.tolist(), "t_cam_world": t.tolist(), "fur": fur,
-                            "anatomy": _anatomy_cam(animal.anatomy, R, t)}
+                            "anatomy": _anatomy_cam(animal.anatomy, R, lifted)}
 
 
 def _anatomy_cam(anatomy: dict, R: np.ndarray, t: np.ndarray) -> dict:
