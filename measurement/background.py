@@ -3,8 +3,6 @@ stripe one index puts on them."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from . import _kernels
@@ -43,58 +41,93 @@ def background_planes(rays: np.ndarray, planes: np.ndarray, labels: np.ndarray, 
     return np.array(found) if found else None
 
 
-@dataclass(frozen=True, eq=False)
 class Footprints:
-    """Where each background plane was seen: cells (P, H, W) bool of a grid over the viewing rays (z = 1),
-    ``cell`` wide from ``origin`` (x, y). The planes are unbounded, the surfaces are not: the front of a
-    weighing platform is a plane parallel to the wall, and the animal standing on the platform lies
-    behind that plane but nowhere behind the platform."""
+    """Where each background plane was seen, as cells of a grid over the viewing rays (z = 1), ``cell`` wide:
+    the planes are unbounded, the surfaces are not. The front of a weighing platform is a plane parallel to
+    the wall, and the animal standing on the platform lies behind that plane but nowhere behind the
+    platform. Computed on the first ``covers`` (most scans never ask).
 
-    cells: np.ndarray
-    origin: tuple[float, float]
-    cell: float
+    A plane with a parallel one farther from the camera (a platform's front before the wall, its top above
+    the floor) is taken where the complete rows saw it (``complete`` labels): growth can carry the wall
+    between the legs onto such a plane. Any other plane (the wall, the floor, a platform's front with no
+    wall behind it) is taken where any background label saw it (``labels``), filled between the seen cells
+    of each grid row (the wall behind the animal, the floor around the feet), and widened by two cells."""
+
+    def __init__(self, rays: np.ndarray, planes: np.ndarray, complete: np.ndarray, labels: np.ndarray,
+                 bg_planes: np.ndarray, tol_mm: float = 8.0, cell: float = 0.01, every: int = 4,
+                 parallel_cos: float = 0.98) -> None:
+        self._args = (rays, planes, complete, labels, bg_planes, tol_mm, every, parallel_cos)
+        self.cell = cell
+        self._cells: np.ndarray | None = None
+        self.origin = (0.0, 0.0)
 
     def covers(self, rays: np.ndarray) -> np.ndarray:
         """(K, P) bool: whether each ray (K, 3) falls where plane p was seen."""
+        cells = self.cells
         ix = np.floor((rays[:, 0] - self.origin[0]) / self.cell).astype(np.int64)
         iy = np.floor((rays[:, 1] - self.origin[1]) / self.cell).astype(np.int64)
-        _, h, w = self.cells.shape
+        _, h, w = cells.shape
         inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
-        out = np.zeros((len(rays), len(self.cells)), bool)
-        out[inside] = self.cells[:, iy[inside], ix[inside]].T
+        out = np.zeros((len(rays), len(cells)), bool)
+        out[inside] = cells[:, iy[inside], ix[inside]].T
         return out
 
+    @property
+    def cells(self) -> np.ndarray:
+        """(P, H, W) bool."""
+        if self._cells is None:
+            self._cells = self._compute()
+        return self._cells
 
-def background_footprints(rays: np.ndarray, planes: np.ndarray, labels: np.ndarray, bg_planes: np.ndarray,
-                          tol_mm: float = 8.0, cell: float = 0.01, every: int = 4,
-                          parallel_cos: float = 0.98) -> Footprints | None:
-    """``Footprints`` of the background planes (P, 4), or None when every plane is unbounded. A plane with
-    a parallel one farther from the camera (the front or the top of a platform before the wall or above
-    the floor) is a bounded surface: the grid cells (``cell`` in ray units, about 30 px at 3072 px)
-    holding a labelled centre (every ``every``-th) within ``tol_mm`` of it, and their neighbours. The
-    farthest of each parallel set (the wall, the floor) covers everything: a noisy sensor labels only some
-    rows of the floor, and the feet must still not sink through it."""
-    from scipy import ndimage
+    def _compute(self) -> np.ndarray:
+        rays, planes, complete, labels, bg_planes, tol_mm, every, parallel_cos = self._args
+        dist = np.abs(bg_planes[:, 3])  # the camera's distance from each plane (|n| = 1)
+        cos = np.abs(bg_planes[:, :3] @ bg_planes[:, :3].T)
+        bounded = ((cos > parallel_cos) & (dist[None, :] > dist[:, None])).any(axis=1)
+        ends = rays[::64, :2]
+        lo = ends.min(axis=0) - 4 * self.cell
+        w, h = (int(v) + 1 for v in np.floor((ends.max(axis=0) + 4 * self.cell - lo) / self.cell))
+        self.origin = (float(lo[0]), float(lo[1]))
+        cells = np.zeros((len(bg_planes), h, w), bool)
+        for which, lab, fill in ((bounded, complete, False), (~bounded, labels, True)):
+            if not which.any():
+                continue
+            idx = np.flatnonzero(lab >= 0)[::every]
+            d = np.abs(intersect(rays.take(idx, axis=0), planes.take(lab[idx], axis=0)) @ bg_planes[:, :3].T
+                       - bg_planes[:, 3])
+            ix = np.clip(np.floor((rays[idx, 0] - lo[0]) / self.cell).astype(np.int64), 0, w - 1)
+            iy = np.clip(np.floor((rays[idx, 1] - lo[1]) / self.cell).astype(np.int64), 0, h - 1)
+            for p in np.flatnonzero(which):
+                seen = np.zeros((h, w), bool)
+                on = d[:, p] < tol_mm
+                seen[iy[on], ix[on]] = True
+                if fill:  # between the first and the last seen cell of each row
+                    seen = np.maximum.accumulate(seen, axis=1) & np.maximum.accumulate(seen[:, ::-1], axis=1)[:, ::-1]
+                cells[p] = _widen(seen, 2 if fill else 1)
+        return cells
 
-    dist = np.abs(bg_planes[:, 3])  # the camera's distance from each plane (|n| = 1)
-    cos = np.abs(bg_planes[:, :3] @ bg_planes[:, :3].T)
-    bounded = ((cos > parallel_cos) & (dist[None, :] > dist[:, None])).any(axis=1)
-    if not bounded.any():
-        return None
-    lo, hi = rays[:, :2].min(axis=0), rays[:, :2].max(axis=0)
-    w, h = (int(v) + 1 for v in np.floor((hi - lo) / cell))
-    cells = np.ones((len(bg_planes), h, w), bool)
-    idx = np.flatnonzero(labels >= 0)[::every]
-    d = np.abs(intersect(rays.take(idx, axis=0), planes.take(labels[idx], axis=0)) @ bg_planes[:, :3].T
-               - bg_planes[:, 3])
-    ix = np.floor((rays[idx, 0] - lo[0]) / cell).astype(np.int64)
-    iy = np.floor((rays[idx, 1] - lo[1]) / cell).astype(np.int64)
-    for p in np.flatnonzero(bounded):
-        seen = np.zeros((h, w), bool)
-        on = d[:, p] < tol_mm
-        seen[iy[on], ix[on]] = True
-        cells[p] = ndimage.binary_dilation(seen, np.ones((3, 3), bool))
-    return Footprints(cells, (float(lo[0]), float(lo[1])), cell)
+
+def _widen(cells: np.ndarray, k: int) -> np.ndarray:
+    """cells (H, W) bool grown by k cells in every direction (a square dilation, by shifts)."""
+    out = cells.copy()
+    for axis in (0, 1):
+        grown = out.copy()
+        for s in range(1, k + 1):
+            if axis == 0:
+                grown[s:] |= out[:-s]
+                grown[:-s] |= out[s:]
+            else:
+                grown[:, s:] |= out[:, :-s]
+                grown[:, :-s] |= out[:, s:]
+        out = grown
+    return out
+
+
+def background_footprints(rays: np.ndarray, planes: np.ndarray, complete: np.ndarray, bg_planes: np.ndarray,
+                          labels: np.ndarray | None = None) -> Footprints:
+    """``Footprints`` of the background planes (P, 4) from the complete rows' labels ``complete`` (M,) and
+    all the background's labels ``labels`` (M,) (``complete`` if not given)."""
+    return Footprints(rays, planes, complete, complete if labels is None else labels, bg_planes)
 
 
 def near_planes(points: np.ndarray, bg_planes: np.ndarray, tol_mm: float = 8.0) -> np.ndarray:

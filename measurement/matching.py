@@ -236,9 +236,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     # 2: a stripe that continued across the animal's outline in the image carried a background index
     # onto the animal; such centres sit off the background surfaces: cut them off as foreground
     bg_planes = background_planes(rays, planes, labels)
-    # where each plane was seen, from the complete rows' labels (growth can carry a wrong index onto a
-    # parallel plane, e.g. the wall between the legs onto the front of a platform)
-    footprint = background_footprints(rays, planes, labels, bg_planes) if bg_planes is not None else None
+    complete = labels  # the complete rows' labels: where a plane before a parallel one was seen
     if bg_planes is not None:
         on_bg = near_planes(intersect(rays, planes.take(np.clip(labels, 0, n - 1), axis=0)), bg_planes) & (labels >= 0)
         off_bg = foreground_mask(c, seg, labels, on_bg)
@@ -262,6 +260,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     bg_cl = _labels_of(seg, seg_label, long_seg)
     table = BinTable(rays, planes)  # the pieces' elevation bins, shared by every conflict curve below
     bg_lit = lit_cells(rays, planes, bg_cl, np.flatnonzero(bg_cl >= 0))
+    footprint = background_footprints(rays, planes, complete, bg_planes, bg_cl) if bg_planes is not None else None
     fg_labels, small, cl, lit, first, shallow = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol,
                                                    n, weighed, params.depth_range_mm, bg_planes, bg_lit,
                                                    pairs, table, footprint)

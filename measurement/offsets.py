@@ -225,7 +225,7 @@ def behind_background(rays, planes, r, idx, n, background: np.ndarray, off: int,
     camera_side = np.where(background[:, 3] <= 0, 1.0, -1.0)  # the sign of n.x - d at the camera (x = 0)
     depth = (p @ background[:, :3].T - background[:, 3]) * camera_side  # (K, P), > 0 on the camera's side
     behind = depth < -margin_mm
-    if footprint is not None:
+    if footprint is not None and behind.any():
         behind &= footprint.covers(rays.take(sub[inside], axis=0))
     return float(behind.any(axis=1).mean())
 

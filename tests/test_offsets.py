@@ -162,9 +162,9 @@ def test_a_plate_pushed_deeper_sinks_behind_the_wall():
 
 
 def test_only_the_seen_part_of_a_nearer_parallel_plane_bounds_the_piece():
-    """A platform's front (a plane parallel to the wall, 200 mm nearer, seen only in a band below the
-    plate) does not push the plate forward: the plate lies behind that plane but not behind the part of it
-    that was seen. The wall, the farthest of the two, still bounds the plate everywhere."""
+    """A platform's front (a plane parallel to the wall, 150 mm nearer than the plate, seen only in a band
+    below it) does not push the plate forward: the plate lies behind that plane but not behind the part of
+    it that was seen. The wall, seen on both sides of the plate, still bounds it."""
     from measurement.background import background_footprints
     from measurement.offsets import behind_background
 
@@ -182,8 +182,8 @@ def test_only_the_seen_part_of_a_nearer_parallel_plane_bounds_the_piece():
     r_all = np.concatenate([r, np.zeros(len(band), np.int64)])
     bg = np.array([[0.0, 0.0, 1.0, WALL_Z], [0.0, 0.0, 1.0, front_z]])
     fp = background_footprints(rays_all, planes, labels, bg)
-    assert fp is not None and fp.cells[0].all() and not fp.cells[1].all()  # the wall unbounded, the front seen
-    assert background_footprints(rays_all, planes, labels, bg[:1]) is None  # a wall alone bounds everything
+    cover = fp.covers(rays_all[idx])
+    assert cover[:, 0].all() and not cover[:, 1].any()  # the wall seen around the plate, the front below it
     unbounded = behind_background(rays_all, planes, r_all, idx, N, bg, k_min)
     bounded = behind_background(rays_all, planes, r_all, idx, N, bg, k_min, footprint=fp)
     assert unbounded == 1.0 and bounded == 0.0
