@@ -49,6 +49,7 @@ VARIANTS: dict[str, dict] = {
     "feed box behind the animal": {"scene": {"box": (0.0, 250.0)}},
     "black coat (albedo x0.25)": {"scene": {"coat": 0.25}},
     "weighing platform (100 mm)": {"scene": {"platform": 100.0}},
+    "weighing platform, no wall": {"scene": {"platform": 100.0, "wall": False}},
     "JPEG quality 90": {"jpeg": 90},
     "JPEG quality 75": {"jpeg": 75},
 }
