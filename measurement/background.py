@@ -48,8 +48,8 @@ class Footprints:
     platform. Computed on the first ``covers`` (most scans never ask).
 
     A plane with a parallel one farther from the camera (a platform's front before the wall, its top above
-    the floor) is taken where the complete rows saw it (``complete`` labels): growth can carry the wall
-    between the legs onto such a plane. Any other plane (the wall, the floor, a platform's front with no
+    the floor, a rail) is taken where the complete rows saw it (``complete`` labels), inside the seen cells
+    only: growth can carry the wall between the legs onto such a plane. Any other plane (the wall, the floor, a platform's front with no
     wall behind it) is taken where any background label saw it (``labels``), filled between the seen cells
     of each grid row (the wall behind the animal, the floor around the feet), and widened by two cells."""
 
@@ -103,8 +103,21 @@ class Footprints:
                 seen[iy[on], ix[on]] = True
                 if fill:  # between the first and the last seen cell of each row
                     seen = np.maximum.accumulate(seen, axis=1) & np.maximum.accumulate(seen[:, ::-1], axis=1)[:, ::-1]
-                cells[p] = _widen(seen, 2 if fill else 1)
+                # a bounded surface (a platform's front, a rail) only where it was seen all around: a point
+                # of the animal seen just beside it is beside it, not behind it
+                cells[p] = _widen(seen, 2) if fill else _interior(seen)
         return cells
+
+
+def _interior(cells: np.ndarray) -> np.ndarray:
+    """cells (H, W) bool whose four neighbours are set too (an erosion by one cell)."""
+    out = cells.copy()
+    out[1:] &= cells[:-1]
+    out[:-1] &= cells[1:]
+    out[:, 1:] &= cells[:, :-1]
+    out[:, :-1] &= cells[:, 1:]
+    out[0], out[-1], out[:, 0], out[:, -1] = False, False, False, False
+    return out
 
 
 def _widen(cells: np.ndarray, k: int) -> np.ndarray:
