@@ -1,7 +1,8 @@
 """Scan robustness to the optics, the sensor and the scene: the same animal and rig geometry with other
 stripe widths, another stripe fan, a noisy sensor, a bright room, a soft camera focus, no wall, a dark,
 a white, a speckled (concrete) or a tiled floor, a feed box behind the animal, a black coat, a weighing
-platform under the animal, and frames that went through JPEG compression.
+platform under the animal, the rails of a chute in front of it, and frames that went through JPEG
+compression.
 
     python bench/optics.py [--size 1536x1024] [--cache /tmp/bodyscan-bench] [--seed 4]
 
@@ -50,6 +51,7 @@ VARIANTS: dict[str, dict] = {
     "black coat (albedo x0.25)": {"scene": {"coat": 0.25}},
     "weighing platform (100 mm)": {"scene": {"platform": 100.0}},
     "weighing platform, no wall": {"scene": {"platform": 100.0, "wall": False}},
+    "chute rails in front": {"scene": {"rails": -300.0}},
     "JPEG quality 90": {"jpeg": 90},
     "JPEG quality 75": {"jpeg": 75},
 }

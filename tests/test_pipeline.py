@@ -104,6 +104,20 @@ def test_an_animal_on_a_weighing_platform_is_placed_on_its_own_stripes(tmp_path,
     assert np.mean(r.scene_stripe[animal] == tk[animal]) > 0.95
 
 
+def test_an_animal_seen_between_the_rails_of_a_chute_is_not_pushed_in_front_of_them(tmp_path):
+    """Two rails between the camera and the animal: their fronts make a background plane before the wall,
+    and the animal's points seen just beside a rail were counted behind it (0 % right on this render);
+    only the interior of where a bounded plane was seen counts."""
+    from measurement.simulate.capture import write_capture
+
+    cap = write_capture(tmp_path / "rails", size=(1024, 683), seed=5, poses=0, scenes=("side",),
+                        scene={"rails": -300.0})
+    r = scan(read_image(cap / "scan" / "side.png"), load_calibration(cap / "truth" / "truth.json"), "side")
+    tk, kind = match_crossings(r.scene_uv, dict(np.load(cap / "truth" / "side_stripes.npz")))
+    animal = kind == 5
+    assert np.mean(r.scene_stripe[animal] == tk[animal]) > 0.95
+
+
 def test_scan_returns_a_contract_shaped_result(small_capture, truth_cal):
     r = scan(read_image(small_capture / "scan" / "side.png"), truth_cal, "side")
     m = r.measurements

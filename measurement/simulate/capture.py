@@ -63,7 +63,7 @@ FLOORS = ("mottled", "concrete", "tiles")
 def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = True,
                  floor_albedo: float | None = None, floor: str = "mottled",
                  box: tuple[float, float] | None = None, coat: float = 1.0,
-                 platform: float | None = None) -> tuple[list, np.ndarray, np.ndarray]:
+                 platform: float | None = None, rails: float | None = None) -> tuple[list, np.ndarray, np.ndarray]:
     """Surfaces of a scan scene in camera coordinates plus the camera pose (R_cam_world, t_cam_world).
     ``wall`` : the view's wall, if it has one; ``floor_albedo`` : a uniform floor instead of the mottled one;
     ``floor`` : the floor's pattern: "mottled" (slow blotches), "concrete" (the blotches plus a fine-grained
@@ -71,7 +71,9 @@ def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = T
     in a top view the lines across the body run along the stripes); ``box`` : (x, z) world mm of the centre
     of a feed box on the floor, 260 x 180 x 220 mm (x, height, z), kind "background"; ``coat`` scales the
     animal's albedo (0.25: a black coat, 0.03-0.22 with fur); ``platform`` : the animal stands on a weighing
-    platform this many mm high (900 x 450 mm, kind "background"), its front parallel to the side view's wall."""
+    platform this many mm high (900 x 450 mm, kind "background"), its front parallel to the side view's wall;
+    ``rails`` : the world z (mm) of two rails of a chute, 40 x 40 x 1400 mm along the animal at heights 150
+    and 400 mm (kind "background"; -300 puts them between the animal and the side camera)."""
     if floor not in FLOORS:
         raise ValueError(f"floor must be one of {', '.join(FLOORS)}, got {floor!r}")
     R, t = look_at(*VIEW_CAMERAS[view])
@@ -111,6 +113,11 @@ def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = T
         v = deck.vertices + np.array([-30.0, platform / 2, 0.0])
         surfaces.append(MeshSurface(v @ R.T + t, np.asarray(deck.faces), "background",
                                     lambda p: np.full(len(p), 0.45)))
+    for height in (150.0, 400.0) if rails is not None else ():
+        bar = trimesh.creation.box((1400.0, 40.0, 40.0))
+        v = bar.vertices + np.array([-30.0, height, rails])
+        surfaces.append(MeshSurface(v @ R.T + t, np.asarray(bar.faces), "background",
+                                    lambda p: np.full(len(p), 0.5)))
     if box is not None:
         crate = trimesh.creation.box((260.0, 180.0, 220.0))
         v = crate.vertices + np.array([box[0], 90.0, box[1]])
@@ -135,7 +142,7 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
     light   : overrides of Lighting fields for every exposure (e.g. {"read_noise": 4.0, "gain": 0.8}),
               plus "stripe_ambient" to set the room light of the calibration stripe images.
     scene   : options of the animal views' scene (``animal_scene``: "wall", "floor_albedo", "floor", "box",
-              "coat", "platform").
+              "coat", "platform", "rails").
     """
     light = dict(light or {})
     stripe_ambient = light.pop("stripe_ambient", None)
