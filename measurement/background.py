@@ -3,6 +3,8 @@ stripe one index puts on them."""
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import numpy as np
 
 from . import _kernels
@@ -45,49 +47,48 @@ class Footprints:
     """Where each background plane was seen, as cells of a grid over the viewing rays (z = 1), ``cell`` wide:
     the planes are unbounded, the surfaces are not. The front of a weighing platform is a plane parallel to
     the wall, and the animal standing on the platform lies behind that plane but nowhere behind the
-    platform. Computed on the first ``covers`` (most scans never ask).
+    platform. The cells are computed on the first ``covers`` (most scans never ask).
 
     A plane with a parallel one farther from the camera (a platform's front before the wall, its top above
     the floor, a rail) is taken where the complete rows saw it (``complete`` labels), inside the seen cells
-    only: growth can carry the wall between the legs onto such a plane. Any other plane (the wall, the floor, a platform's front with no
-    wall behind it) is taken where any background label saw it (``labels``), filled between the seen cells
-    of each grid row (the wall behind the animal, the floor around the feet), and widened by two cells."""
+    only: growth can carry the wall between the legs onto such a plane. Any other plane (the wall, the
+    floor, a platform's front with no wall behind it) is taken where any background label saw it
+    (``labels``, ``complete`` if not given), filled between the seen cells of each grid row (the wall behind
+    the animal, the floor around the feet), and widened by two cells."""
 
-    def __init__(self, rays: np.ndarray, planes: np.ndarray, complete: np.ndarray, labels: np.ndarray,
-                 bg_planes: np.ndarray, tol_mm: float = 8.0, cell: float = 0.01, every: int = 4,
+    def __init__(self, rays: np.ndarray, planes: np.ndarray, complete: np.ndarray, bg_planes: np.ndarray,
+                 labels: np.ndarray | None = None, tol_mm: float = 8.0, cell: float = 0.01, every: int = 4,
                  parallel_cos: float = 0.98) -> None:
-        self._args = (rays, planes, complete, labels, bg_planes, tol_mm, every, parallel_cos)
+        self._args = (rays, planes, complete, complete if labels is None else labels, bg_planes, tol_mm, every,
+                      parallel_cos)
         self.cell = cell
-        self._cells: np.ndarray | None = None
-        self.origin = (0.0, 0.0)
+        ends = rays[::64, :2]  # the grid spans every ray (a subsample's extent, four cells wider)
+        lo = ends.min(axis=0) - 4 * cell
+        self.origin = (float(lo[0]), float(lo[1]))
+        self.shape = tuple(int(v) + 1 for v in np.floor((ends.max(axis=0) + 4 * cell - lo) / cell))[::-1]
 
     def covers(self, rays: np.ndarray) -> np.ndarray:
         """(K, P) bool: whether each ray (K, 3) falls where plane p was seen."""
         cells = self.cells
-        ix = np.floor((rays[:, 0] - self.origin[0]) / self.cell).astype(np.int64)
-        iy = np.floor((rays[:, 1] - self.origin[1]) / self.cell).astype(np.int64)
+        ix, iy = self._cell_of(rays)
         _, h, w = cells.shape
         inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
         out = np.zeros((len(rays), len(cells)), bool)
         out[inside] = cells[:, iy[inside], ix[inside]].T
         return out
 
-    @property
+    def _cell_of(self, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return (np.floor((rays[:, 0] - self.origin[0]) / self.cell).astype(np.int64),
+                np.floor((rays[:, 1] - self.origin[1]) / self.cell).astype(np.int64))
+
+    @cached_property
     def cells(self) -> np.ndarray:
         """(P, H, W) bool."""
-        if self._cells is None:
-            self._cells = self._compute()
-        return self._cells
-
-    def _compute(self) -> np.ndarray:
         rays, planes, complete, labels, bg_planes, tol_mm, every, parallel_cos = self._args
         dist = np.abs(bg_planes[:, 3])  # the camera's distance from each plane (|n| = 1)
         cos = np.abs(bg_planes[:, :3] @ bg_planes[:, :3].T)
         bounded = ((cos > parallel_cos) & (dist[None, :] > dist[:, None])).any(axis=1)
-        ends = rays[::64, :2]
-        lo = ends.min(axis=0) - 4 * self.cell
-        w, h = (int(v) + 1 for v in np.floor((ends.max(axis=0) + 4 * self.cell - lo) / self.cell))
-        self.origin = (float(lo[0]), float(lo[1]))
+        h, w = self.shape
         cells = np.zeros((len(bg_planes), h, w), bool)
         for which, lab, fill in ((bounded, complete, False), (~bounded, labels, True)):
             if not which.any():
@@ -95,8 +96,8 @@ class Footprints:
             idx = np.flatnonzero(lab >= 0)[::every]
             d = np.abs(intersect(rays.take(idx, axis=0), planes.take(lab[idx], axis=0)) @ bg_planes[:, :3].T
                        - bg_planes[:, 3])
-            ix = np.clip(np.floor((rays[idx, 0] - lo[0]) / self.cell).astype(np.int64), 0, w - 1)
-            iy = np.clip(np.floor((rays[idx, 1] - lo[1]) / self.cell).astype(np.int64), 0, h - 1)
+            ix, iy = self._cell_of(rays.take(idx, axis=0))
+            ix, iy = np.clip(ix, 0, w - 1), np.clip(iy, 0, h - 1)
             for p in np.flatnonzero(which):
                 seen = np.zeros((h, w), bool)
                 on = d[:, p] < tol_mm
@@ -134,13 +135,6 @@ def _widen(cells: np.ndarray, k: int) -> np.ndarray:
                 grown[:, :-s] |= out[:, s:]
         out = grown
     return out
-
-
-def background_footprints(rays: np.ndarray, planes: np.ndarray, complete: np.ndarray, bg_planes: np.ndarray,
-                          labels: np.ndarray | None = None) -> Footprints:
-    """``Footprints`` of the background planes (P, 4) from the complete rows' labels ``complete`` (M,) and
-    all the background's labels ``labels`` (M,) (``complete`` if not given)."""
-    return Footprints(rays, planes, complete, complete if labels is None else labels, bg_planes)
 
 
 def near_planes(points: np.ndarray, bg_planes: np.ndarray, tol_mm: float = 8.0) -> np.ndarray:

@@ -26,7 +26,7 @@ import numpy as np
 
 from . import _kernels
 from .background import (
-    background_footprints,
+    Footprints,
     background_like,
     background_planes,
     claim_background,
@@ -260,7 +260,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     bg_cl = _labels_of(seg, seg_label, long_seg)
     table = BinTable(rays, planes)  # the pieces' elevation bins, shared by every conflict curve below
     bg_lit = lit_cells(rays, planes, bg_cl, np.flatnonzero(bg_cl >= 0))
-    footprint = background_footprints(rays, planes, complete, bg_planes, bg_cl) if bg_planes is not None else None
+    footprint = Footprints(rays, planes, complete, bg_planes, bg_cl) if bg_planes is not None else None
     fg_labels, small, cl, lit, first, shallow = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol,
                                                    n, weighed, params.depth_range_mm, bg_planes, bg_lit,
                                                    pairs, table, footprint)
@@ -300,7 +300,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
 
 
 def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, weighed, zrange,
-                bg_planes, bg_lit, pairs: _Pairs, table: BinTable, footprint=None
+                bg_planes, bg_lit, pairs: _Pairs, table: BinTable, footprint: Footprints | None = None
                 ) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None, bool]:
     """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
     (M,) the centres of every piece that was weighed for an offset. ``bg_lit`` : the projector cells lit
@@ -387,7 +387,7 @@ def _pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pair
 
 def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask, fg_pairs, long_seg, left, right, tol, n,
                         bg_planes, first, table: BinTable, max_behind: float = 0.001, evidence_share: float = 0.6,
-                        footprint=None) -> int:
+                        footprint: Footprints | None = None) -> int:
     """Stripes (0 or a shift away from the conflicts) by which to move every animal label in ``fg_labels``
     (segment -> label), from the conflict curve of all of them together against the background's labels
     ``bg_cl`` (M,) and the cells they light ``bg_lit``; ``fg_pairs`` : the ``_neighbour_pairs`` of ``fg_mask``;

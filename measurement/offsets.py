@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -17,6 +18,9 @@ from . import _kernels
 from .planes import pencil_axis
 from .threads import second_core
 from .triangulation import intersect, kernel_layout
+
+if TYPE_CHECKING:
+    from .background import Footprints
 
 _log = logging.getLogger(__name__)
 
@@ -175,7 +179,7 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
                       residue: float = 0.5, pattern_edge: float = 0.02, beside_placed: bool = False,
                       lit: np.ndarray | None = None, background: np.ndarray | None = None,
                       table: BinTable | None = None, shallow: bool = False, report: dict | None = None,
-                      footprint=None) -> int | None:
+                      footprint: Footprints | None = None) -> int | None:
     """Absolute offset of a cluster with relative labels ``r[idx]``, from the projector's point of view.
 
     A background point lit by stripe k at projector elevation e proves that nothing stood in front of it
@@ -196,7 +200,7 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
     With the ``background`` planes (P, 4) the other physical bound joins in for the first piece: no part
     of the animal lies behind the floor or the wall (``behind_background``). Sliding a piece one stripe
     away from its conflicts moves it deeper, and its feet then sink through the floor; the ramp reading
-    never stops at such an offset. ``footprint`` : where each plane was seen (``background_footprints``).
+    never stops at such an offset. ``footprint`` : where each plane was seen (``background.Footprints``).
     """
     curve = conflict_curve(rays, planes, cl, r, idx, n, bins, lit, table)
     if curve is None:
@@ -212,7 +216,7 @@ def occlusion_offset(rays, planes, cl, r, idx, n, projector_right: bool = True, 
 
 
 def behind_background(rays, planes, r, idx, n, background: np.ndarray, off: int, margin_mm: float = 8.0,
-                      footprint=None) -> float:
+                      footprint: Footprints | None = None) -> float:
     """The share of the piece (relative labels ``r[idx]``) that offset ``off`` puts more than
     ``margin_mm`` behind a background plane (P, 4), on the side away from the camera; with ``footprint``
     (``background.Footprints``) only behind the part of a plane that was seen."""

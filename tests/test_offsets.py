@@ -165,7 +165,7 @@ def test_only_the_seen_part_of_a_nearer_parallel_plane_bounds_the_piece():
     """A platform's front (a plane parallel to the wall, 150 mm nearer than the plate, seen only in a band
     below it) does not push the plate forward: the plate lies behind that plane but not behind the part of
     it that was seen. The wall, seen on both sides of the plate, still bounds it."""
-    from measurement.background import background_footprints
+    from measurement.background import Footprints
     from measurement.offsets import behind_background
 
     planes, rays, cl, idx, true = _scene(-60.0, 60.0)
@@ -181,7 +181,7 @@ def test_only_the_seen_part_of_a_nearer_parallel_plane_bounds_the_piece():
     labels = np.concatenate([cl, np.repeat(np.arange(N), len(band) // N)])
     r_all = np.concatenate([r, np.zeros(len(band), np.int64)])
     bg = np.array([[0.0, 0.0, 1.0, WALL_Z], [0.0, 0.0, 1.0, front_z]])
-    fp = background_footprints(rays_all, planes, labels, bg)
+    fp = Footprints(rays_all, planes, labels, bg)
     cover = fp.covers(rays_all[idx])
     assert cover[:, 0].all() and not cover[:, 1].any()  # the wall seen around the plate, the front below it
     unbounded = behind_background(rays_all, planes, r_all, idx, N, bg, k_min)

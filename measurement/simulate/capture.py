@@ -109,21 +109,21 @@ def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = T
         surfaces.append(PlaneSurface(n_wall, float(off + n_wall @ t), "wall",
                                      lambda p: 0.58 + 0.04 * _noise3(to_world(p), seed + 7, 4, 200, 800)))
     if platform:
-        deck = trimesh.creation.box((900.0, platform, 450.0))
-        v = deck.vertices + np.array([-30.0, platform / 2, 0.0])
-        surfaces.append(MeshSurface(v @ R.T + t, np.asarray(deck.faces), "background",
-                                    lambda p: np.full(len(p), 0.45)))
-    for height in (150.0, 400.0) if rails is not None else ():
-        bar = trimesh.creation.box((1400.0, 40.0, 40.0))
-        v = bar.vertices + np.array([-30.0, height, rails])
-        surfaces.append(MeshSurface(v @ R.T + t, np.asarray(bar.faces), "background",
-                                    lambda p: np.full(len(p), 0.5)))
+        surfaces.append(_block((900.0, platform, 450.0), (-30.0, platform / 2, 0.0), 0.45, R, t))
+    if rails is not None:
+        surfaces += [_block((1400.0, 40.0, 40.0), (-30.0, height, rails), 0.5, R, t) for height in (150.0, 400.0)]
     if box is not None:
-        crate = trimesh.creation.box((260.0, 180.0, 220.0))
-        v = crate.vertices + np.array([box[0], 90.0, box[1]])
-        surfaces.append(MeshSurface(v @ R.T + t, np.asarray(crate.faces), "background",
-                                    lambda p: np.full(len(p), 0.5)))
+        surfaces.append(_block((260.0, 180.0, 220.0), (box[0], 90.0, box[1]), 0.5, R, t))
     return surfaces, R, t
+
+
+def _block(size: tuple[float, float, float], centre: tuple[float, float, float], albedo: float,
+           R: np.ndarray, t: np.ndarray) -> MeshSurface:
+    """An axis-aligned box of ``size`` (x, y, z) mm centred at ``centre`` (world mm), uniform ``albedo``, in
+    camera coordinates (kind "background": a platform, a rail, a feed box)."""
+    mesh = trimesh.creation.box(size)
+    v = mesh.vertices + np.asarray(centre)
+    return MeshSurface(v @ R.T + t, np.asarray(mesh.faces), "background", lambda p: np.full(len(p), albedo))
 
 
 def calibration_scene(board: Board, R: np.ndarray, t: np.ndarray, fx: float) -> list:
