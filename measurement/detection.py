@@ -109,17 +109,19 @@ def _median_width(width: np.ndarray) -> float:
     return float(np.median(width))
 
 
-def to_gray8(image: np.ndarray) -> np.ndarray:
-    """(H, W) or (H, W, 3) uint8/uint16 -> (H, W) uint8 (16-bit scaled by 1/257)."""
-    if image.ndim == 3:
-        code = cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY
-        image = cv2.cvtColor(image, code)
+def to_gray8(image: np.ndarray, name: str = "image") -> np.ndarray:
+    """(H, W), (H, W, 1), (H, W, 3) or (H, W, 4) uint8/uint16 -> (H, W) uint8 (16-bit scaled by 1/257);
+    ImageError, naming the image as ``name``, for any other shape or type."""
+    if image.dtype not in (np.uint8, np.uint16):
+        raise ImageError(f"{name} must be uint8 or uint16, got {image.dtype}")
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[:, :, 0]
+    elif image.ndim == 3 and image.shape[2] in (3, 4):
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY if image.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
     if image.ndim != 2:
-        raise ImageError(f"image must be (H, W) gray or (H, W, 3) colour, got shape {image.shape}")
+        raise ImageError(f"{name} must be (H, W) gray or (H, W, 3) colour, got shape {image.shape}")
     if image.dtype == np.uint16:
         return cv2.convertScaleAbs(image, alpha=1.0 / 257.0)
-    if image.dtype != np.uint8:
-        raise ImageError(f"image must be uint8 or uint16, got {image.dtype}")
     return image
 
 
@@ -138,10 +140,21 @@ def detect_centres(image: np.ndarray, params: DetectionParams = DetectionParams(
     """
     g = to_gray8(image)
     if ambient is not None:
-        a = to_gray8(ambient)
+        a = to_gray8(ambient, "ambient image")
         if a.shape != g.shape:
             raise ImageError(f"ambient image is {a.shape[1]}x{a.shape[0]}, the stripe image {g.shape[1]}x{g.shape[0]}")
+        # stripes only add light: an ambient image brighter than the stripe image beyond a flicker's 2 % is
+        # the other one of the pair
+        lit, dark = float(g[::4, ::4].mean()), float(a[::4, ::4].mean())
+        if dark > 1.02 * lit + 1.0:
+            raise ImageError("the ambient image is brighter than the stripe image: are the two swapped? (the "
+                             "ambient image is the same view with the projector off)")
         g = subtract_ambient(g, a)
+        _, lo, hi, _ = _kernels.sample_levels(g, 4, 250)
+        if hi - lo < 10:
+            raise StripeDetectionError("nothing is left of the stripe image once the ambient image is subtracted: "
+                                       "the ambient image is as bright as the stripe image (are the two swapped, "
+                                       "or was the projector on for both?)")
     noise = noise_sigma(g) * smoothing_gain(params, g.shape[1])
     params = replace(params, min_contrast=max(params.min_contrast, params.noise_k * noise))
     # the frame is filtered in bands of rows (each with enough rows above and below for the vertical blur),
@@ -291,7 +304,7 @@ def check_image(image: np.ndarray, expected: tuple[int, int] | None, name: str =
     if expected is not None and (w, h) != tuple(expected):
         raise ImageError(f"{name}: image is {w}x{h} but the calibration is for {expected[0]}x{expected[1]}")
     # every 4th pixel of every 4th row: how many are saturated, the darkest and the brightest
-    bright, lo, hi, n = _kernels.sample_levels(to_gray8(image), 4, 250)
+    bright, lo, hi, n = _kernels.sample_levels(to_gray8(image, name), 4, 250)
     if bright / n > 0.5:
         raise StripeDetectionError(f"{name}: more than half of the image is saturated: reduce exposure or "
                                    "projector brightness")

@@ -137,6 +137,35 @@ def test_blank_saturated_and_wrong_size_images_are_refused(truth_cal):
         scan(np.zeros((100, 120), np.uint8), truth_cal)
 
 
+def test_arrays_of_other_shapes_and_types_are_refused_by_name(small_capture, truth_cal):
+    """A two-channel or integer colour array, or such an ambient image, is an ImageError naming which of
+    the two it was, never OpenCV's own error (a two-channel frame raised cv2.error before)."""
+    img = read_image(small_capture / "scan" / "side.png")
+    h, w = img.shape
+    with pytest.raises(ImageError, match=r"^image must be .* got shape \(.*, 2\)"):
+        scan(np.dstack([img] * 2), truth_cal)
+    with pytest.raises(ImageError, match="^image must be uint8 or uint16, got int32"):
+        scan(np.dstack([img] * 3).astype(np.int32), truth_cal)
+    with pytest.raises(ImageError, match="^ambient image must be .* got shape"):
+        scan(img, truth_cal, ambient=np.zeros((h, w, 2), np.uint8))
+    with pytest.raises(ImageError, match="^ambient image must be uint8 or uint16, got float32"):
+        scan(img, truth_cal, ambient=np.zeros((h, w), np.float32))
+    one_channel = scan(img[:, :, None], truth_cal, "side")
+    np.testing.assert_array_equal(one_channel.stripe, scan(img, truth_cal, "side").stripe)
+
+
+def test_a_swapped_or_lit_ambient_image_is_named(small_capture, truth_cal):
+    """The stripe and ambient images swapped (the stripes would be read as dark lines between 55 'stripes'
+    and the scan blamed the calibration), or the projector on for both, is said as such."""
+    img = read_image(small_capture / "scan" / "side.png")
+    ambient = read_image(small_capture / "scan" / "side_ambient.png")
+    with pytest.raises(ImageError, match="brighter than the stripe image: are the two swapped"):
+        scan(ambient, truth_cal, ambient=img)
+    with pytest.raises(StripeDetectionError, match="nothing is left of the stripe image"):
+        scan(img, truth_cal, ambient=img)
+    assert len(scan(img, truth_cal, "side", ambient=ambient).points) > 1000
+
+
 def test_camera_only_or_other_stripe_count_calibrations_are_refused(small_capture, truth_cal):
     img = read_image(small_capture / "scan" / "side.png")
     with pytest.raises(ScanError, match="camera-only"):
