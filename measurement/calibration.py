@@ -41,6 +41,8 @@ class Calibration:
 def load_calibration(src: str | Path | dict) -> Calibration:
     """Read calibration.json (a path or an already parsed dict); CalibrationError names what is wrong."""
     name = "calibration"
+    if not isinstance(src, (str, Path, dict)):
+        raise CalibrationError(f"a calibration is a calibration.json path or its parsed object, not {type(src).__name__}")
     if isinstance(src, dict):
         data = src
     else:

@@ -16,7 +16,8 @@ class Intrinsics:
     """Camera intrinsics in OpenCV's model.
 
     camera_matrix : (3, 3) float64, pixels
-    dist_coeffs   : (5,) float64, (k1, k2, p1, p2, k3)
+    dist_coeffs   : (5,) float64, (k1, k2, p1, p2, k3), or OpenCV's longer models as given: (8,) adds the
+                    rational k4-k6, (12,) the thin prism s1-s4, (14,) the tilt tauX, tauY
     image_size    : (width, height), pixels
     """
 
@@ -49,11 +50,21 @@ class Intrinsics:
 
     @classmethod
     def from_dict(cls, d: dict) -> Intrinsics:
+        """From a calibration's fields; ValueError names a malformed one. Distortion models of 0 or 4
+        coefficients are padded to 5, those of 8, 12 or 14 (another tool's rational, thin-prism or tilted
+        model) kept whole: cutting them to 5 moved the rays of a wide-angle camera's image corners."""
         K = np.asarray(d["camera_matrix"], dtype=np.float64).reshape(3, 3)
-        dist = np.zeros(5)
         given = np.asarray(d["dist_coeffs"], dtype=np.float64).ravel()
-        dist[: min(5, given.size)] = given[:5]
+        if given.size not in (0, 4, 5, 8, 12, 14):
+            raise ValueError(f"dist_coeffs: {given.size} coefficients; OpenCV's models have 4, 5, 8, 12 or 14")
+        if not (np.isfinite(K).all() and np.isfinite(given).all()):
+            raise ValueError("camera_matrix and dist_coeffs must be finite numbers")
+        if K[0, 0] <= 0 or K[1, 1] <= 0:
+            raise ValueError("camera_matrix: the focal lengths fx, fy must be positive")
+        dist = np.pad(given, (0, 5 - given.size)) if given.size < 5 else given
         w, h = d["image_size"]
+        if int(w) <= 0 or int(h) <= 0:
+            raise ValueError(f"image_size: {w}x{h} is not an image size")
         return cls(K, dist, (int(w), int(h)))
 
 

@@ -115,3 +115,19 @@ def test_progress_is_reported_in_order(small_capture):
     fractions = [f for f, _ in seen]
     assert fractions == sorted(fractions) and fractions[-1] == 1.0
     assert any("light planes" in s for _, s in seen)
+
+
+def test_a_malformed_calibration_is_a_calibration_error_naming_it(tmp_path):
+    good = {"image_size": [640, 480], "camera_matrix": [[500, 0, 320], [0, 500, 240], [0, 0, 1]],
+            "dist_coeffs": [0, 0, 0, 0, 0], "planes": [[0.9, 0.0, -0.4, 100.0]]}
+    assert load_calibration(good).planes.shape == (1, 4)
+    for bad, says in (({**good, "dist_coeffs": [float("nan")] * 5}, "malformed field .*finite"),
+                      ({**good, "planes": [[0.9, 0.0, float("inf"), 1.0]]}, "non-finite"),
+                      ({k: v for k, v in good.items() if k != "camera_matrix"}, "missing or malformed")):
+        with pytest.raises(CalibrationError, match=says):
+            load_calibration(bad)
+    (tmp_path / "calibration.json").write_text("[1, 2]")
+    with pytest.raises(CalibrationError, match="calibration.json: expected a JSON object"):
+        load_calibration(tmp_path / "calibration.json")
+    with pytest.raises(CalibrationError, match="not list"):
+        load_calibration([good])

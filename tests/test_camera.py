@@ -39,3 +39,28 @@ def test_intrinsics_survive_a_dict_round_trip(intr):
     assert np.allclose(back.camera_matrix, intr.camera_matrix)
     assert np.allclose(back.dist_coeffs, intr.dist_coeffs)
     assert back.image_size == intr.image_size
+
+
+def test_a_rational_distortion_model_is_kept_whole(intr):
+    """A calibration.json from another tool with OpenCV's 8-coefficient rational model: the rays of the
+    frame's corners follow all eight (cutting to five, as before, moved them by pixels)."""
+    d = intr.to_dict()
+    d["dist_coeffs"] = [-0.28, 0.09, 1e-4, -2e-4, -0.01, 0.05, -0.02, 0.01]
+    rational = Intrinsics.from_dict(d)
+    assert rational.dist_coeffs.size == 8
+    pts = np.array([[-330.0, -220.0, 1000.0], [0.0, 0.0, 1000.0], [310.0, 210.0, 1000.0]])
+    uv = project(pts, rational)
+    assert np.abs(undistort(uv, rational) - pts[:, :2] / pts[:, 2:]).max() < 1e-9
+    five = Intrinsics.from_dict({**d, "dist_coeffs": d["dist_coeffs"][:5]})
+    assert np.abs(project(pts, five) - uv).max() > 1.0
+
+
+@pytest.mark.parametrize("field, value, says", [
+    ("dist_coeffs", [0.1, 0.2, 0.3], "3 coefficients"),
+    ("dist_coeffs", [float("nan")] * 5, "finite"),
+    ("camera_matrix", [[0, 0, 320], [0, 500, 240], [0, 0, 1]], "focal lengths"),
+    ("image_size", [0, 480], "not an image size"),
+])
+def test_malformed_intrinsics_name_their_field(intr, field, value, says):
+    with pytest.raises(ValueError, match=says):
+        Intrinsics.from_dict({**intr.to_dict(), field: value})
