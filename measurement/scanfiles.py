@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from .calibration import load_calibration
-from .errors import ScanError
+from .errors import MeasurementError, ScanError
 from .images import read_image
 from .pipeline import VIEWS, scan
 from .ply import write_ply
@@ -26,9 +26,17 @@ def view_of(path: Path, given: str | None) -> str:
 def scan_files(calibration_path: Path, images: list[Path], out: Path, view: str | None = None) -> list[str]:
     """Scan each image; one image writes into OUT, several into OUT/<image stem>/. Returns summary lines.
 
-    An ``<name>_ambient.<ext>`` beside an image (projector off) is used to cancel room light.
+    An ``<name>_ambient.<ext>`` beside an image (projector off) is used to cancel room light. Every error
+    names the image file it is about (the core's own messages say "image" or "ambient image").
     """
     cal = load_calibration(calibration_path)
+    if len(images) > 1:
+        seen: dict[str, Path] = {}
+        for path in images:
+            if path.stem in seen:
+                raise ScanError(f"{seen[path.stem]} and {path} would both be written to {out / path.stem}: "
+                                "give the images different names, or scan them one at a time")
+            seen[path.stem] = path
     lines = []
     for path in images:
         target = out if len(images) == 1 else out / path.stem
@@ -38,8 +46,16 @@ def scan_files(calibration_path: Path, images: list[Path], out: Path, view: str 
         ambient = read_image(ambient_path) if ambient_path else None
         try:
             result = scan(image, cal, v, ambient)
-        except ScanError as exc:
-            raise ScanError(f"{path.name}: {exc}") from None
+        except MeasurementError as exc:
+            text = str(exc)
+            for said in ("ambient image", "image"):
+                if text.startswith(said) and (said == "image" or ambient_path is not None):
+                    name = ambient_path.name if said == "ambient image" and ambient_path else path.name
+                    text = f"{name}{text[len(said):]}"
+                    break
+            else:
+                text = f"{path.name}: {text}"
+            raise type(exc)(text) from None
         target.mkdir(parents=True, exist_ok=True)
         (target / "cloud.ply").write_bytes(write_ply(result.points, result.stripe))
         (target / "scene.ply").write_bytes(write_ply(result.scene_points, result.scene_stripe))

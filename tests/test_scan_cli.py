@@ -42,3 +42,30 @@ def test_a_camera_only_calibration_is_refused_plainly(small_capture, tmp_path):
     path.write_text(json.dumps(cal))
     r = bodyscan("scan", path, small_capture / "scan" / "side.png", "-o", tmp_path / "o")
     assert r.returncode == 2 and "camera-only" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_every_scan_error_names_its_file_and_no_image_overwrites_another(small_capture, tmp_path):
+    """The core says "image ..." or "ambient image ..."; `bodyscan scan` says which file. Two images
+    whose outputs would share OUT/<stem> are refused before anything is written."""
+    import cv2
+    import numpy as np
+    import pytest
+
+    from measurement.errors import ImageError, ScanError, StripeDetectionError
+    from measurement.scanfiles import scan_files
+
+    cal = small_capture / "truth" / "truth.json"
+    side = small_capture / "scan" / "side.png"
+    h, w = cv2.imread(str(side), cv2.IMREAD_GRAYSCALE).shape
+    cv2.imwrite(str(tmp_path / "side_glare.png"), np.full((h, w), 255, np.uint8))
+    with pytest.raises(StripeDetectionError, match="^side_glare.png: more than half of the image is saturated"):
+        scan_files(cal, [tmp_path / "side_glare.png"], tmp_path / "o1")
+    shutil.copy(side, tmp_path / "side_b.png")
+    cv2.imwrite(str(tmp_path / "side_b_ambient.png"), np.zeros((h // 2, w), np.uint8))
+    with pytest.raises(ImageError, match=r"^side_b_ambient.png is \d+x\d+, the stripe image"):
+        scan_files(cal, [tmp_path / "side_b.png"], tmp_path / "o2")
+    (tmp_path / "a").mkdir()
+    shutil.copy(side, tmp_path / "a" / "side.png")
+    with pytest.raises(ScanError, match="would both be written to"):
+        scan_files(cal, [side, tmp_path / "a" / "side.png"], tmp_path / "o3")
+    assert not (tmp_path / "o3").exists()
