@@ -43,6 +43,7 @@ def run_calibration(engine: Engine, job: Job, report: Report) -> Apply:
 def run_scan(engine: Engine, job: Job, report: Report) -> Apply:
     """Reconstruct the cloud of a stored scan image; returns how to store cloud and measurements."""
     from measurement.calibration import load_calibration
+    from measurement.errors import MeasurementError, naming_files
     from measurement.images import decode_image
     from measurement.pipeline import scan
 
@@ -55,7 +56,11 @@ def run_scan(engine: Engine, job: Job, report: Report) -> Apply:
     gray = decode_image(image, record.image_name or f"scan {record.id}")
     dark = decode_image(ambient, f"ambient image of scan {record.id}") if ambient is not None else None
     report(0.1, "reconstructing point cloud")
-    result = scan(gray, load_calibration(calibration.result), view=record.view, ambient=dark)
+    name = record.image_name or f"scan {record.id}"
+    try:
+        result = scan(gray, load_calibration(calibration.result), view=record.view, ambient=dark)
+    except MeasurementError as exc:
+        raise naming_files(exc, name, f"ambient image of {name}" if dark is not None else None) from None
     cloud = {key: getattr(result, key, None) for key in sessions.CLOUD_KEYS}
     found = to_jsonable(result.measurements)
 

@@ -23,3 +23,16 @@ class StripeDetectionError(MeasurementError):
 
 class ScanError(MeasurementError):
     """A scan image cannot be turned into a point cloud or measurements."""
+
+
+def naming_files(exc: MeasurementError, image: str, ambient: str | None = None) -> MeasurementError:
+    """The same error with the files named: the core's messages about a frame start with "image" or
+    "ambient image"; those become the file names, any other message is prefixed with the image's."""
+    text = str(exc)
+    if ambient is not None and text.startswith("ambient image"):
+        text = ambient + text[len("ambient image"):]
+    elif text.startswith("image"):
+        text = image + text[len("image"):]
+    else:
+        text = f"{image}: {text}"
+    return type(exc)(text)

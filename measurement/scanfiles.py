@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from .calibration import load_calibration
-from .errors import MeasurementError, ScanError
+from .errors import MeasurementError, ScanError, naming_files
 from .images import read_image
 from .pipeline import VIEWS, scan
 from .ply import write_ply
@@ -47,15 +47,7 @@ def scan_files(calibration_path: Path, images: list[Path], out: Path, view: str 
         try:
             result = scan(image, cal, v, ambient)
         except MeasurementError as exc:
-            text = str(exc)
-            for said in ("ambient image", "image"):
-                if text.startswith(said) and (said == "image" or ambient_path is not None):
-                    name = ambient_path.name if said == "ambient image" and ambient_path else path.name
-                    text = f"{name}{text[len(said):]}"
-                    break
-            else:
-                text = f"{path.name}: {text}"
-            raise type(exc)(text) from None
+            raise naming_files(exc, path.name, ambient_path.name if ambient_path else None) from None
         target.mkdir(parents=True, exist_ok=True)
         (target / "cloud.ply").write_bytes(write_ply(result.points, result.stripe))
         (target / "scene.ply").write_bytes(write_ply(result.scene_points, result.scene_stripe))

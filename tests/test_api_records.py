@@ -210,3 +210,28 @@ def test_health_reports_the_queue(client):
     body = client.get("/api/health").json()
     assert body["status"] == "ok" and body["jobs"] == {"queued": 1, "running": 0}
     assert body["workers"] == {"expected": 0, "alive": 0}  # the test app runs no worker processes
+
+
+def test_a_frame_the_scan_refuses_fails_its_job_naming_the_uploaded_file(client, small_capture, tmp_path):
+    """A glare frame passes the upload's checks (readable, the calibration's size) and is refused by the
+    scan job: the job's error names the uploaded file, not just "image"."""
+    import json
+
+    from app.jobs import run_until_idle
+    from storage import calibrations
+    from tests.backend_support import settings_for
+
+    truth = json.loads((small_capture / "truth" / "truth.json").read_text())
+    w, h = truth["image_size"]
+    engine = engine_of(client)
+    cal_id = finished_calibration(engine, image_size=(w, h))
+    with session_scope(engine) as db:
+        calibrations.store_result(db, cal_id, truth)
+    s = session_for(client, cal_id)
+    r = client.post(f"/api/sessions/{s['id']}/scans", files={"image": ("glare.png", png(w, h, 255))},
+                    data={"view": "side"})
+    assert r.status_code in (201, 202), r.text
+    assert run_until_idle(engine, settings_for(tmp_path)) == 1
+    failed = client.get("/api/jobs", params={"status": "failed"}).json()
+    assert len(failed) == 1
+    assert failed[0]["error"].startswith("glare.png: more than half of the image is saturated"), failed[0]["error"]
