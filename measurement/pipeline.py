@@ -119,8 +119,26 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     on_animal = idx[animal]
     meas["animal_contrast"] = (round(float(np.median(centres.contrast.take(on_animal))), 1)
                                if len(on_animal) >= 200 else None)
+    meas["frame_edges"] = frame_edges(uv[animal], image.shape[:2])
     meas["warnings"] = _warnings(meas, labels)
     return ScanResult(animal_pts, animal_stripe, uv[animal], pts, stripe, uv, meas, timings)
+
+
+FRAME_MARGIN = 0.01  # share of the image's width (height) within which an animal point is at its edge
+
+
+def frame_edges(uv: np.ndarray, shape: tuple[int, int], margin: float = FRAME_MARGIN) -> list[str]:
+    """The picture's edges ("left", "right", "top", "bottom") that animal points uv (N, 2) px come within
+    ``margin`` of the image's size (H, W) of: there the animal probably continues out of view. On the
+    benches' renders the animals keep 17-55 % of the frame from every edge; the Stanford bunny's ears
+    reach the top of its 1536 px side view."""
+    if len(uv) == 0:
+        return []
+    h, w = shape
+    mu, mv = max(4.0, margin * w), max(4.0, margin * h)
+    u, v = uv[:, 0], uv[:, 1]
+    near = {"left": u.min() < mu, "right": u.max() > w - 1 - mu, "top": v.min() < mv, "bottom": v.max() > h - 1 - mv}
+    return [edge for edge, hit in near.items() if hit]
 
 
 FAINT_ANIMAL = 25.0  # gray levels: the animal's stripes' median contrast under which a scan is warned about
@@ -142,6 +160,11 @@ def _warnings(meas: dict, labels: Labels) -> list[str]:
                    "are missing from the cloud; this happens when the animal fills the stripe pattern to its "
                    "edge or casts no visible shadow: move it so that stripes fall on the floor or wall on both "
                    "sides of it")
+    edges = meas.get("frame_edges") or []
+    if edges:
+        where = " and ".join(edges)
+        out.append(f"the animal reaches the {where} edge of the picture: part of it is probably out of view, so "
+                   "its length and height may be short: step the camera back or centre the animal and scan again")
     if labels.faint_shadow:
         out.append("the stripe indices of the animal were read from a faint shadow (most of the animal's shadow "
                    "is hidden from the camera), so they may be off by one stripe, which moves the whole cloud "

@@ -265,3 +265,18 @@ def test_scans_in_several_threads_at_once_give_each_its_own_result(small_capture
         own = alone[i % 2]
         assert np.array_equal(r.points, own.points) and np.array_equal(r.stripe, own.stripe)
         assert r.measurements["body_height_mm"] == own.measurements["body_height_mm"]
+
+
+def test_an_animal_cut_by_the_picture_edge_is_named_in_the_warnings(small_capture, truth_cal, tmp_path, monkeypatch):
+    """With the side camera 200 mm higher the feet reach the bottom of the picture: the scan names the
+    edge and warns that the length and height may be short. The small capture's centred animal does not."""
+    import measurement.simulate.capture as sim
+
+    r = scan(read_image(small_capture / "scan" / "side.png"), truth_cal, "side")
+    assert r.measurements["frame_edges"] == [] and not any("edge of the picture" in w for w in r.measurements["warnings"])
+    (cx, cy, cz), (tx, ty, tz), up = sim.VIEW_CAMERAS["side"]
+    monkeypatch.setitem(sim.VIEW_CAMERAS, "side", ((cx, cy + 200.0, cz), (tx, ty + 200.0, tz), up))
+    cap = sim.write_capture(tmp_path / "high", size=(1024, 683), poses=0, seed=5, scenes=("side",))
+    high = scan(read_image(cap / "scan" / "side.png"), load_calibration(cap / "truth" / "truth.json"), "side")
+    assert high.measurements["frame_edges"] == ["bottom"]
+    assert any("reaches the bottom edge of the picture" in w for w in high.measurements["warnings"])
