@@ -206,8 +206,9 @@ def _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm):
 def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, min_rows: int = 15,
                       share: float = 0.95, tol_mm: float = 5.0, flatness: float = 4.0) -> dict[int, int]:
     """Unlabelled segments that exactly one stripe index puts on a background plane (>= ``share`` of
-    their points within ``tol_mm``), and as flat as the background labelled so far: the median distance
-    of their points from the plane at most ``flatness`` times that of the labelled background's points.
+    their points within ``tol_mm``), and as flat as the background labelled so far on the plane they are
+    nearest to: the median distance of their points from it at most ``flatness`` times that of the
+    labelled background's points nearest to it (``_background_flatness``).
     Animal stripes are curved and fit no single plane that way; a short piece of one (a tail's stripe cut
     by fur) can still land within ``tol_mm`` of the floor at some wrong index, but not as flat as the
     floor (over the 3072 px and 1536 px benches, the claims above 4x the floor's median distance were 141
@@ -226,14 +227,17 @@ def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, mi
         flatness_bg.result()
         return {}
     k = hits[one].argmax(axis=1)
-    # the claimed segments' median distance from the nearest background plane at their index
+    # the claimed segments' median distance from each background plane at their index, judged against the
+    # labelled background's noise on the plane they are nearest to
     claimed = np.zeros(len(sids), bool)
     claimed[one] = True
     members = idx[np.repeat(claimed, np.diff(starts))]  # their centres, segment by segment as in ``one``
     counts = np.diff(starts)[one]
-    dist = _plane_distance(intersect(rays.take(members, axis=0), planes.take(np.repeat(k, counts), axis=0)),
-                           bg_planes)
-    flat = _group_medians(dist, counts) <= flatness * flatness_bg.result()
+    points = intersect(rays.take(members, axis=0), planes.take(np.repeat(k, counts), axis=0))
+    dist = np.abs(points @ bg_planes[:, :3].T - bg_planes[:, 3])  # (K, P)
+    medians = np.column_stack([_group_medians(dist[:, j], counts) for j in range(len(bg_planes))])
+    nearest = medians.argmin(axis=1)
+    flat = medians[np.arange(len(one)), nearest] <= flatness * flatness_bg.result()[nearest]
     return dict(zip(sids[one][flat].tolist(), k[flat].tolist(), strict=True))
 
 
@@ -243,22 +247,29 @@ def _group_medians(x: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return _kernels.group_medians(np.ascontiguousarray(x, dtype=np.float64), counts.astype(np.int64))
 
 
-def _plane_distance(points: np.ndarray, bg_planes: np.ndarray) -> np.ndarray:
-    """Distance (K,) mm of points (K, 3) from the nearest of the background planes (P, 4)."""
-    d = np.abs(points @ bg_planes[:, :3].T - bg_planes[:, 3])
-    return np.minimum.reduce(list(d.T)) if d.shape[1] > 1 else d[:, 0]  # as min(axis=1), faster over two
-
-
-def _background_flatness(rays, planes, seg, seg_label: dict[int, int], bg_planes, most: int = 20000) -> float:
-    """Median distance (mm) of the labelled background's points (segment -> index ``seg_label``, at most
-    ``most`` of them, evenly thinned) from the nearest background plane: the centres' noise in depth."""
+def _background_flatness(rays, planes, seg, seg_label: dict[int, int], bg_planes, most: int = 20000,
+                         min_points: int = 200) -> np.ndarray:
+    """Per background plane (P,): the median distance (mm) from it of the labelled background's points
+    (segment -> index ``seg_label``, at most ``most`` of them, evenly thinned) nearest to it: each plane's
+    noise in depth. A floor seen at a grazing angle is far flatter than a wall seen face-on (0.05 mm against
+    0.7 mm from a camera 280 mm above the floor): one median over both held the wall's unlabelled stripes
+    to the floor's noise and left them to join the animal. A plane with fewer than ``min_points`` labelled
+    points is held to the median over all of them; inf without any."""
     table = label_table(seg, seg_label)
     idx = np.flatnonzero(table[seg] >= 0)
     idx = idx[:: len(idx) // most + 1]
     if len(idx) == 0:
-        return np.inf
-    return float(np.median(_plane_distance(intersect(rays.take(idx, axis=0), planes.take(table[seg[idx]], axis=0)),
-                                           bg_planes)))
+        return np.full(len(bg_planes), np.inf)
+    d = np.abs(intersect(rays.take(idx, axis=0), planes.take(table[seg[idx]], axis=0)) @ bg_planes[:, :3].T
+               - bg_planes[:, 3])
+    nearest, dist = d.argmin(axis=1), d.min(axis=1)
+    overall = float(np.median(dist))
+    out = np.full(len(bg_planes), overall)
+    for j in range(len(bg_planes)):
+        own = dist[nearest == j]
+        if len(own) >= min_points:
+            out[j] = float(np.median(own))
+    return out
 
 
 def background_like(rays, planes, seg, mask, bg_planes, exclude: set, share: float = 0.8) -> np.ndarray:

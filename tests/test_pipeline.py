@@ -89,6 +89,23 @@ def test_a_tiled_floor_is_told_from_the_animal(tmp_path):
     assert r.measurements["body_height_mm"] == pytest.approx(ref["body_height_mm"], rel=0.05)
 
 
+def test_a_low_camera_claims_the_wall_it_sees_face_on(tmp_path, monkeypatch):
+    """The side camera 150 mm lower: the floor, seen at a grazing angle, is labelled from complete rows and
+    lies within 0.05 mm of its plane, while the wall's stripes scatter 0.7 mm about theirs. Held to the
+    floor's flatness, the wall went unclaimed, joined the animal and the scan was refused; each plane is
+    now held to its own."""
+    import measurement.simulate.capture as sim
+
+    (cx, cy, cz), (tx, ty, tz), up = sim.VIEW_CAMERAS["side"]
+    monkeypatch.setitem(sim.VIEW_CAMERAS, "side", ((cx, cy - 150.0, cz), (tx, ty - 150.0, tz), up))
+    cap = sim.write_capture(tmp_path / "low", size=(1024, 683), poses=0, seed=5, scenes=("side",))
+    r = scan(read_image(cap / "scan" / "side.png"), load_calibration(cap / "truth" / "truth.json"), "side")
+    tk, kind = match_crossings(r.scene_uv, dict(np.load(cap / "truth" / "side_stripes.npz")))
+    wall, animal = kind == 3, kind == 5
+    assert np.mean(r.scene_stripe[wall] == tk[wall]) > 0.98
+    assert animal.sum() > 2000 and np.mean(r.scene_stripe[animal] == tk[animal]) > 0.98
+
+
 @pytest.mark.parametrize("wall", [True, False])
 def test_an_animal_on_a_weighing_platform_is_placed_on_its_own_stripes(tmp_path, wall):
     """A 100 mm platform under the animal: its front is a background plane (parallel to the wall), and the
