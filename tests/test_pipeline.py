@@ -89,16 +89,15 @@ def test_a_tiled_floor_is_told_from_the_animal(tmp_path):
     assert r.measurements["body_height_mm"] == pytest.approx(ref["body_height_mm"], rel=0.05)
 
 
-def test_a_low_camera_claims_the_wall_it_sees_face_on(tmp_path, monkeypatch):
+def test_a_low_camera_claims_the_wall_it_sees_face_on(tmp_path):
     """The side camera 150 mm lower: the floor, seen at a grazing angle, is labelled from complete rows and
     lies within 0.05 mm of its plane, while the wall's stripes scatter 0.7 mm about theirs. Held to the
     floor's flatness, the wall went unclaimed, joined the animal and the scan was refused; each plane is
     now held to its own."""
-    import measurement.simulate.capture as sim
+    from measurement.simulate.capture import write_capture
 
-    (cx, cy, cz), (tx, ty, tz), up = sim.VIEW_CAMERAS["side"]
-    monkeypatch.setitem(sim.VIEW_CAMERAS, "side", ((cx, cy - 150.0, cz), (tx, ty - 150.0, tz), up))
-    cap = sim.write_capture(tmp_path / "low", size=(1024, 683), poses=0, seed=5, scenes=("side",))
+    cap = write_capture(tmp_path / "low", size=(1024, 683), poses=0, seed=5, scenes=("side",),
+                        scene={"camera_height": -150.0})
     r = scan(read_image(cap / "scan" / "side.png"), load_calibration(cap / "truth" / "truth.json"), "side")
     tk, kind = match_crossings(r.scene_uv, dict(np.load(cap / "truth" / "side_stripes.npz")))
     wall, animal = kind == 3, kind == 5
@@ -284,16 +283,15 @@ def test_scans_in_several_threads_at_once_give_each_its_own_result(small_capture
         assert r.measurements["body_height_mm"] == own.measurements["body_height_mm"]
 
 
-def test_an_animal_cut_by_the_picture_edge_is_named_in_the_warnings(small_capture, truth_cal, tmp_path, monkeypatch):
+def test_an_animal_cut_by_the_picture_edge_is_named_in_the_warnings(small_capture, truth_cal, tmp_path):
     """With the side camera 200 mm higher the feet reach the bottom of the picture: the scan names the
     edge and warns that the length and height may be short. The small capture's centred animal does not."""
-    import measurement.simulate.capture as sim
+    from measurement.simulate.capture import write_capture
 
     r = scan(read_image(small_capture / "scan" / "side.png"), truth_cal, "side")
     assert r.measurements["frame_edges"] == [] and not any("edge of the picture" in w for w in r.measurements["warnings"])
-    (cx, cy, cz), (tx, ty, tz), up = sim.VIEW_CAMERAS["side"]
-    monkeypatch.setitem(sim.VIEW_CAMERAS, "side", ((cx, cy + 200.0, cz), (tx, ty + 200.0, tz), up))
-    cap = sim.write_capture(tmp_path / "high", size=(1024, 683), poses=0, seed=5, scenes=("side",))
+    cap = write_capture(tmp_path / "high", size=(1024, 683), poses=0, seed=5, scenes=("side",),
+                        scene={"camera_height": 200.0})
     high = scan(read_image(cap / "scan" / "side.png"), load_calibration(cap / "truth" / "truth.json"), "side")
     assert high.measurements["frame_edges"] == ["bottom"]
     assert any("reaches the bottom edge of the picture" in w for w in high.measurements["warnings"])

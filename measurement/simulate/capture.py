@@ -63,7 +63,8 @@ FLOORS = ("mottled", "concrete", "tiles")
 def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = True,
                  floor_albedo: float | None = None, floor: str = "mottled",
                  box: tuple[float, float] | None = None, coat: float = 1.0,
-                 platform: float | None = None, rails: float | None = None) -> tuple[list, np.ndarray, np.ndarray]:
+                 platform: float | None = None, rails: float | None = None,
+                 camera_height: float = 0.0) -> tuple[list, np.ndarray, np.ndarray]:
     """Surfaces of a scan scene in camera coordinates plus the camera pose (R_cam_world, t_cam_world).
     ``wall`` : the view's wall, if it has one; ``floor_albedo`` : a uniform floor instead of the mottled one;
     ``floor`` : the floor's pattern: "mottled" (slow blotches), "concrete" (the blotches plus a fine-grained
@@ -73,10 +74,14 @@ def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = T
     animal's albedo (0.25: a black coat, 0.03-0.22 with fur); ``platform`` : the animal stands on a weighing
     platform this many mm high (900 x 450 mm, kind "background"), its front parallel to the side view's wall;
     ``rails`` : the world z (mm) of two rails of a chute, 40 x 40 x 1400 mm along the animal at heights 150
-    and 400 mm (kind "background"; -300 puts them between the animal and the side camera)."""
+    and 400 mm (kind "background"; -300 puts them between the animal and the side camera); ``camera_height``
+    : mm added to the camera's height (the projector moves with it): a side, front or back camera keeps its
+    viewing direction (its target moves too); the top camera's distance to the floor changes by as much."""
     if floor not in FLOORS:
         raise ValueError(f"floor must be one of {', '.join(FLOORS)}, got {floor!r}")
-    R, t = look_at(*VIEW_CAMERAS[view])
+    centre, target, up = (np.asarray(v, float) for v in VIEW_CAMERAS[view])
+    lift = np.array([0.0, camera_height, 0.0])
+    R, t = look_at(centre + lift, target if view == "top" else target + lift, up)
     to_world = lambda p: (p - t) @ R  # noqa: E731  camera -> world
 
     def fur_albedo(points: np.ndarray) -> np.ndarray:
@@ -142,7 +147,7 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
     light   : overrides of Lighting fields for every exposure (e.g. {"read_noise": 4.0, "gain": 0.8}),
               plus "stripe_ambient" to set the room light of the calibration stripe images.
     scene   : options of the animal views' scene (``animal_scene``: "wall", "floor_albedo", "floor", "box",
-              "coat", "platform", "rails").
+              "coat", "platform", "rails", "camera_height").
     """
     light = dict(light or {})
     stripe_ambient = light.pop("stripe_ambient", None)
