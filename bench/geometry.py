@@ -1,6 +1,7 @@
 """Stripe-label correctness on other rig geometries: projector left of the camera, a narrower and a
 wider baseline than the reference rig's 250 mm, and the rig 150 mm lower or 200 mm higher (the side camera
-keeps its viewing direction; the top camera comes 150 mm nearer the floor or goes 200 mm farther).
+keeps its viewing direction, so 200 mm higher cuts the feet off at the bottom of the picture; the top
+camera comes 150 mm nearer the floor or goes 200 mm farther), or 450 mm higher and aimed down at the animal.
 
     python bench/geometry.py [--size 1536x1024] [--cache /tmp/bodyscan-bench]
 
@@ -21,7 +22,8 @@ from bench.common import cached_capture, print_pieces, summary  # noqa: E402
 from measurement.simulate.rig import default_rig  # noqa: E402
 
 GEOMETRIES = {"left": -250.0, "narrow": 150.0, "wide": 400.0}  # projector baseline, mm (negative: left)
-HEIGHTS = {"low": -150.0, "high": 200.0}  # the rig's height change, mm (the reference baseline)
+HEIGHTS = {"low": ({"camera_height": -150.0}), "high": ({"camera_height": 200.0}),  # the rig's height, mm
+           "aimed": ({"camera_height": 450.0, "camera_aimed": True})}
 RENDERS = ((40, True, 21), (50, False, 22))
 
 
@@ -39,11 +41,11 @@ def main() -> None:
             cap = cached_capture(Path(args.cache) / f"geometry-{size[0]}x{size[1]}-{label}", stripes=stripes,
                                  size=size, seed=seed, fur=fur, rig=default_rig(size, stripes, baseline_mm=baseline))
             rights += print_pieces(label, cap)
-    for name, lift in HEIGHTS.items():
+    for name, scene in HEIGHTS.items():
         for stripes, fur, seed in RENDERS:
             label = f"{name}-{stripes}-{'fur' if fur else 'clean'}-{seed}"
             cap = cached_capture(Path(args.cache) / f"geometry-{size[0]}x{size[1]}-{label}", stripes=stripes,
-                                 size=size, seed=seed, fur=fur, scene={"camera_height": lift})
+                                 size=size, seed=seed, fur=fur, scene=scene)
             rights += print_pieces(label, cap)
     print(summary(rights))
 

@@ -64,7 +64,7 @@ def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = T
                  floor_albedo: float | None = None, floor: str = "mottled",
                  box: tuple[float, float] | None = None, coat: float = 1.0,
                  platform: float | None = None, rails: float | None = None,
-                 camera_height: float = 0.0) -> tuple[list, np.ndarray, np.ndarray]:
+                 camera_height: float = 0.0, camera_aimed: bool = False) -> tuple[list, np.ndarray, np.ndarray]:
     """Surfaces of a scan scene in camera coordinates plus the camera pose (R_cam_world, t_cam_world).
     ``wall`` : the view's wall, if it has one; ``floor_albedo`` : a uniform floor instead of the mottled one;
     ``floor`` : the floor's pattern: "mottled" (slow blotches), "concrete" (the blotches plus a fine-grained
@@ -76,12 +76,13 @@ def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = T
     ``rails`` : the world z (mm) of two rails of a chute, 40 x 40 x 1400 mm along the animal at heights 150
     and 400 mm (kind "background"; -300 puts them between the animal and the side camera); ``camera_height``
     : mm added to the camera's height (the projector moves with it): a side, front or back camera keeps its
-    viewing direction (its target moves too); the top camera's distance to the floor changes by as much."""
+    viewing direction (its target moves too) unless ``camera_aimed`` (then it tilts to keep the animal
+    centred); the top camera's distance to the floor changes by as much."""
     if floor not in FLOORS:
         raise ValueError(f"floor must be one of {', '.join(FLOORS)}, got {floor!r}")
     centre, target, up = (np.asarray(v, float) for v in VIEW_CAMERAS[view])
     lift = np.array([0.0, camera_height, 0.0])
-    R, t = look_at(centre + lift, target if view == "top" else target + lift, up)
+    R, t = look_at(centre + lift, target if view == "top" or camera_aimed else target + lift, up)
     to_world = lambda p: (p - t) @ R  # noqa: E731  camera -> world
 
     def fur_albedo(points: np.ndarray) -> np.ndarray:
@@ -147,7 +148,7 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
     light   : overrides of Lighting fields for every exposure (e.g. {"read_noise": 4.0, "gain": 0.8}),
               plus "stripe_ambient" to set the room light of the calibration stripe images.
     scene   : options of the animal views' scene (``animal_scene``: "wall", "floor_albedo", "floor", "box",
-              "coat", "platform", "rails", "camera_height").
+              "coat", "platform", "rails", "camera_height", "camera_aimed").
     """
     light = dict(light or {})
     stripe_ambient = light.pop("stripe_ambient", None)
