@@ -262,13 +262,15 @@ def _background_flatness(rays, planes, seg, seg_label: dict[int, int], bg_planes
         return np.full(len(bg_planes), np.inf)
     d = np.abs(intersect(rays.take(idx, axis=0), planes.take(table[seg[idx]], axis=0)) @ bg_planes[:, :3].T
                - bg_planes[:, 3])
-    nearest, dist = d.argmin(axis=1), d.min(axis=1)
-    overall = float(np.median(dist))
-    out = np.full(len(bg_planes), overall)
-    for j in range(len(bg_planes)):
-        own = dist[nearest == j]
-        if len(own) >= min_points:
-            out[j] = float(np.median(own))
+    if len(bg_planes) == 1:
+        return np.array([float(np.median(d[:, 0]))])
+    nearest = d.argmin(axis=1)
+    dist = np.take_along_axis(d, nearest[:, None], axis=1)[:, 0]
+    counts = np.bincount(nearest, minlength=len(bg_planes))
+    out = np.array([float(np.median(dist[nearest == j])) if counts[j] >= min_points else np.nan
+                    for j in range(len(bg_planes))])
+    if np.isnan(out).any():
+        out[np.isnan(out)] = float(np.median(dist))
     return out
 
 
