@@ -248,16 +248,16 @@ def _group_medians(x: np.ndarray, counts: np.ndarray) -> np.ndarray:
 
 
 def _background_flatness(rays, planes, seg, seg_label: dict[int, int], bg_planes, most: int = 20000,
-                         min_points: int = 200) -> np.ndarray:
+                         min_points: int = 200, least_mm: float = 0.1) -> np.ndarray:
     """Per background plane (P,): the noise in depth (mm) its claims are held to: the median distance from
     it of the labelled background's points (segment -> index ``seg_label``, at most ``most`` of them,
-    evenly thinned) nearest to it, but never under the median over all of them. A wall seen face-on
-    scatters far more than a floor seen at a grazing angle (0.5 mm against 0.04 mm from a camera 280 mm
-    above the floor): held to one median over both, a low camera's wall went unclaimed and joined the
-    animal. The floor is not held to its own, lower figure: its complete rows lie in the bright far field,
-    and its stripes between the legs scatter four to five times as much (0.3-0.4 mm against 0.08 mm on
-    the 40-stripe clean side view). A plane with fewer than ``min_points`` labelled points gets the
-    overall median; inf without any labelled point."""
+    evenly thinned) nearest to it, and at least ``least_mm``. A wall seen face-on scatters far more than a
+    floor seen at a grazing angle (0.5 mm against 0.04 mm from a camera 280 mm above the floor): held to
+    one median over both, a low camera's wall went unclaimed and joined the animal. The floor of the
+    simulator's clean renders lies within 0.04-0.08 mm of its plane in the bright far field, while its
+    stripes between the legs scatter 0.3-0.4 mm: held to its own figure unbounded, four right floor
+    segments of the 40-stripe clean side view went unclaimed. A plane with fewer than ``min_points``
+    labelled points gets the median over all of them; inf without any labelled point."""
     table = label_table(seg, seg_label)
     idx = np.flatnonzero(table[seg] >= 0)
     idx = idx[:: len(idx) // most + 1]
@@ -266,13 +266,15 @@ def _background_flatness(rays, planes, seg, seg_label: dict[int, int], bg_planes
     d = np.abs(intersect(rays.take(idx, axis=0), planes.take(table[seg[idx]], axis=0)) @ bg_planes[:, :3].T
                - bg_planes[:, 3])
     if len(bg_planes) == 1:
-        return np.array([float(np.median(d[:, 0]))])
+        return np.array([max(least_mm, float(np.median(d[:, 0])))])
     nearest = d.argmin(axis=1)
     dist = np.take_along_axis(d, nearest[:, None], axis=1)[:, 0]
-    overall = float(np.median(dist))
     counts = np.bincount(nearest, minlength=len(bg_planes))
-    return np.array([max(overall, float(np.median(dist[nearest == j]))) if counts[j] >= min_points else overall
-                     for j in range(len(bg_planes))])
+    out = np.array([float(np.median(dist[nearest == j])) if counts[j] >= min_points else np.nan
+                    for j in range(len(bg_planes))])
+    if np.isnan(out).any():
+        out[np.isnan(out)] = float(np.median(dist))
+    return np.maximum(out, least_mm)
 
 
 def background_like(rays, planes, seg, mask, bg_planes, exclude: set, share: float = 0.8) -> np.ndarray:
