@@ -145,6 +145,34 @@ def test_a_stripe_cut_along_its_length_keeps_its_label_but_stray_specks_do_not()
     assert out == {1: 17}
 
 
+def test_a_stripe_broken_with_up_to_three_rows_missing_keeps_its_label():
+    """A tail tip seen from above: its first stripe breaks with three rows missing and the next piece a
+    few pixels over (3072 px clean top view: the group fell under 10 points and the body length to
+    -8.9 %). Up to three missing rows continue the stripe; a fourth, or a jump beyond the reach the gap
+    allows, does not."""
+    from measurement.detection import Centres
+    from measurement.matching import _continue_along
+    from measurement.simulate.rig import default_rig
+
+    planes = default_rig((1536, 1024), 40).projector.planes_cam()
+
+    def broken(missing: int, jump: float = 0.0, tol_mm: float = 5.0) -> dict:
+        v = np.r_[np.arange(20), np.arange(20 + missing, 40 + missing)]
+        u = 700 + np.where(v >= 20, jump, 0.0)
+        n = len(v)
+        c = Centres(u, v.astype(np.int32), np.full(n, 40.0, np.float32), np.full(n, 4.0, np.float32),
+                    np.full(n, 30.0, np.float32))
+        rays = np.column_stack([(u - 768) / 1667.0, (v - 512) / 1667.0, np.ones(n)])
+        return _continue_along(c, rays, planes, np.repeat([0, 1], 20), {0: 17}, np.ones(n, bool), {0},
+                               link_px=2.0, tol_mm=tol_mm)
+
+    assert broken(3) == {1: 17} and broken(2) == {1: 17}  # (up to one missing row, as before: {})
+    assert broken(4) == {}
+    # the columns may move by link_px per row of the gap beyond the first (with depth as loose as a jump needs)
+    assert broken(3, 4.0, tol_mm=60.0) == {1: 17}
+    assert broken(3, 8.0, tol_mm=60.0) == {}
+
+
 def test_a_piece_on_projector_rays_that_lit_something_else_does_not_continue_the_stripe():
     """The same cut stripe, but the projector cells of its second piece are already lit elsewhere (on
     the background): a projector ray lights one surface, so that piece is not this stripe's."""
