@@ -141,6 +141,7 @@ def frame_edges(uv: np.ndarray, shape: tuple[int, int], margin: float = FRAME_MA
     return [edge for edge, hit in near.items() if hit]
 
 
+FEW_ANIMAL_POINTS, FEW_ANIMAL_SHARE = 300, 0.02  # an "animal" under both is stray points, not an animal
 FAINT_ANIMAL = 25.0  # gray levels: the animal's stripes' median contrast under which a scan is warned about
 
 
@@ -160,6 +161,12 @@ def _warnings(meas: dict, labels: Labels) -> list[str]:
                    "are missing from the cloud; this happens when the animal fills the stripe pattern to its "
                    "edge or casts no visible shadow: move it so that stripes fall on the floor or wall on both "
                    "sides of it")
+    scene = meas.get("scene_point_count") or 0
+    hardly_any = "point_count" in meas and meas["point_count"] < max(FEW_ANIMAL_POINTS, FEW_ANIMAL_SHARE * scene)
+    if hardly_any:
+        out.append(f"hardly anything was found off the floor and wall ({meas['point_count']} of {scene} "
+                   "points): is the animal in the picture and inside the stripe pattern? The measurements "
+                   "below describe those few points, not an animal")
     edges = meas.get("frame_edges") or []
     if edges:
         where = " and ".join(edges)
@@ -170,6 +177,6 @@ def _warnings(meas: dict, labels: Labels) -> list[str]:
                    "is hidden from the camera), so they may be off by one stripe, which moves the whole cloud "
                    "in depth and changes its size: check one measurement against a tape, or move the projector "
                    "or the animal so that more of its shadow falls on floor the camera sees")
-    if meas.get("body_length_mm") is None or meas.get("body_height_mm") is None:
+    if not hardly_any and (meas.get("body_length_mm") is None or meas.get("body_height_mm") is None):
         out.append("no body length or height: too few animal points were reconstructed")
     return out

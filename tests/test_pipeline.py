@@ -295,3 +295,23 @@ def test_an_animal_cut_by_the_picture_edge_is_named_in_the_warnings(small_captur
     high = scan(read_image(cap / "scan" / "side.png"), load_calibration(cap / "truth" / "truth.json"), "side")
     assert high.measurements["frame_edges"] == ["bottom"]
     assert any("reaches the bottom edge of the picture" in w for w in high.measurements["warnings"])
+
+
+def test_a_scene_without_an_animal_says_so(small_capture, truth_cal, tmp_path, monkeypatch):
+    """The pen empty (the simulator's animal moved 10 m aside, out of view): the few stray points left
+    off the floor and wall are not reported as an animal without a warning that says so; the small
+    capture's animal is not warned about."""
+    import measurement.simulate.capture as sim
+    from measurement.simulate.animal import Animal, quadruped
+
+    def far_away(seed: int = 0) -> Animal:
+        a = quadruped(seed=seed)
+        return Animal(a.vertices + np.array([10000.0, 0.0, 0.0]), a.faces, a.anatomy)
+
+    r = scan(read_image(small_capture / "scan" / "side.png"), truth_cal, "side")
+    assert not any("hardly anything" in w for w in r.measurements["warnings"])
+    monkeypatch.setattr(sim, "quadruped", far_away)
+    cap = sim.write_capture(tmp_path / "empty", size=(1024, 683), poses=0, seed=5, scenes=("side",))
+    r = scan(read_image(cap / "scan" / "side.png"), load_calibration(cap / "truth" / "truth.json"), "side")
+    assert r.measurements["point_count"] < 300
+    assert any("hardly anything was found off the floor and wall" in w for w in r.measurements["warnings"])
