@@ -19,7 +19,9 @@ PREFERRED = ("body_length", "body_height", "tail_length", "neck_width")
 BASE = ("animal_id", "tag", "species", "breed", "sex", "birth_date", "animal_status",
         "session_id", "date", "operator", "calibration_id")
 LONG = ("animal_id", "tag", "species", "session_id", "date", "name", "kind", "value_mm", "method",
-        "who", "when", "scan_id", "view", "calibration_id", "software_version", "measurement_id", "revision")
+        "who", "when", "scan_id", "view", "calibration_id", "software_version", "measurement_id", "revision",
+        "scan_warnings")
+WARNINGS_SEP = " | "  # between a scan's warnings in one cell
 
 
 @dataclass(frozen=True)
@@ -46,11 +48,13 @@ def selected_sessions(session: Session, flt: ExportFilter) -> list[tuple[Measuri
 
 
 def wide_rows(session: Session, flt: ExportFilter) -> tuple[list[str], list[dict]]:
-    """Header and one row per session: animal fields, ISO date, each measurement per kind in mm, and
-    the % difference of automatic and picked values to the manual one where both exist."""
+    """Header and one row per session: animal fields, ISO date, each measurement per kind in mm, the %
+    difference of automatic and picked values to the manual one where both exist, and what the session's
+    scans warned about (a cut-off animal, a faint coat or shadow, parts left unplaced), once each."""
     pairs = selected_sessions(session, flt)
     values = _latest_values([s.id for s, _ in pairs], session)
-    header = list(BASE) + _measure_columns(values)
+    warned = _scan_warnings(session, [s.id for s, _ in pairs])
+    header = list(BASE) + _measure_columns(values) + ["scan_warnings"]
     rows = []
     for record, animal in pairs:
         row = _base(record, animal)
@@ -62,14 +66,18 @@ def wide_rows(session: Session, flt: ExportFilter) -> tuple[list[str], list[dict
             ref, val = values.get((record.id, name, "manual")), values.get((record.id, name, kind))
             if ref and val is not None:
                 row[key] = round((val - ref) / ref * 100.0, 2)
+        said = [w for _, sid, ws in warned for w in ws if sid == record.id]
+        row["scan_warnings"] = WARNINGS_SEP.join(dict.fromkeys(said)) or None
         rows.append(row)
     return header, rows
 
 
 def long_rows(session: Session, flt: ExportFilter) -> tuple[list[str], list[dict]]:
-    """Header and one row per current measurement value, for herd-management software."""
+    """Header and one row per current measurement value, for herd-management software; a value from a
+    scan carries that scan's warnings."""
     pairs = {s.id: (s, a) for s, a in selected_sessions(session, flt)}
     views = dict(session.exec(select(Scan.id, Scan.view).where(Scan.session_id.in_(list(pairs)))).all())
+    warned = {scan_id: ws for scan_id, _, ws in _scan_warnings(session, list(pairs))}
     rows = []
     for m in current_measurements(session, list(pairs)):
         record, animal = pairs[m.session_id]
@@ -80,10 +88,21 @@ def long_rows(session: Session, flt: ExportFilter) -> tuple[list[str], list[dict
             "who": m.created_by, "when": _iso(m.created_at), "scan_id": m.scan_id, "view": views.get(m.scan_id),
             "calibration_id": m.calibration_id, "software_version": m.software_version,
             "measurement_id": m.id, "revision": m.revision,
+            "scan_warnings": WARNINGS_SEP.join(warned.get(m.scan_id, [])) or None,
         })
     rows.sort(key=lambda r: (r["tag"], r["date"], r["session_id"], r["name"], KINDS.index(r["kind"])
                              if r["kind"] in KINDS else 9))
     return list(LONG), rows
+
+
+def _scan_warnings(session: Session, session_ids: list[int]) -> list[tuple[int, int, list[str]]]:
+    """(scan, session, its warnings) for the scans of these sessions whose stored measurements have any."""
+    if not session_ids:
+        return []
+    found = session.exec(select(Scan.id, Scan.session_id, Scan.measurements)
+                         .where(Scan.session_id.in_(session_ids)).order_by(Scan.id)).all()
+    return [(scan_id, sid, [str(w) for w in (meas or {}).get("warnings") or []])
+            for scan_id, sid, meas in found if (meas or {}).get("warnings")]
 
 
 def _latest_values(session_ids: list[int], session: Session) -> dict[tuple[int, str, str], float]:

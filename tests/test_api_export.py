@@ -107,3 +107,27 @@ def test_cells_that_would_run_as_formulas_are_neutralised(value, cell):
 def test_csv_is_rfc_4180():
     text = to_csv(["a", "b"], [{"a": 'say "hi", then', "b": -1.5}, {"a": "x\ny"}])
     assert text == 'a,b\r\n"say ""hi"", then",-1.5\r\n"x\ny",\r\n'
+
+
+def test_values_from_a_scan_that_warned_carry_its_warnings(client):
+    """The scan's warnings (here: the animal cut by the picture's edge) follow its automatic value into
+    both layouts; values without a scan, and sessions whose scans warned of nothing, have none."""
+    import numpy as np
+
+    from tests.backend_support import scan_with_cloud
+
+    ids = herd(client)
+    engine = client.app.state.engine
+    first = ids['=HYPERLINK("x")']
+    warning = "the animal reaches the bottom edge of the picture: part of it is probably out of view"
+    scan_id = scan_with_cloud(engine, first, np.zeros((3, 3)), np.zeros(3, np.int64), np.zeros((3, 2)),
+                              {"point_count": 3, "warnings": [warning, "=cmd"]})
+    with session_scope(engine) as db:
+        add_measurement(db, session_id=first, scan_id=scan_id, name="body_height", kind="automatic",
+                        method="auto:side", value_mm=700.0, created_by="bodyscan")
+    long = [r for r in read(client, format="long") if r["name"] == "body_height"]
+    assert long[0]["scan_warnings"] == warning + " | =cmd"
+    assert all(r["scan_warnings"] == "" for r in read(client, format="long") if r["name"] != "body_height")
+    wide = {r["tag"]: r for r in read(client)}
+    assert wide['\'=HYPERLINK("x")']["scan_warnings"] == warning + " | =cmd"
+    assert wide["DE 02"]["scan_warnings"] == ""
