@@ -53,10 +53,10 @@ def run_scan(engine: Engine, job: Job, report: Report) -> Apply:
         calibration = calibrations.require_usable(db, owner.calibration_id)
         image, ambient = sessions.scan_image(db, record.id), sessions.scan_ambient(db, record.id)
     report(0.05, "decoding image")
-    gray = decode_image(image, record.image_name or f"scan {record.id}")
+    name = record.image_name or f"scan {record.id}"
+    gray = decode_image(image, name)
     dark = decode_image(ambient, f"ambient image of scan {record.id}") if ambient is not None else None
     report(0.1, "reconstructing point cloud")
-    name = record.image_name or f"scan {record.id}"
     try:
         result = scan(gray, load_calibration(calibration.result), view=record.view, ambient=dark)
     except MeasurementError as exc:

@@ -265,8 +265,6 @@ def _background_flatness(rays, planes, seg, seg_label: dict[int, int], bg_planes
         return np.full(len(bg_planes), np.inf)
     d = np.abs(intersect(rays.take(idx, axis=0), planes.take(table[seg[idx]], axis=0)) @ bg_planes[:, :3].T
                - bg_planes[:, 3])
-    if len(bg_planes) == 1:
-        return np.array([max(least_mm, float(np.median(d[:, 0])))])
     nearest = d.argmin(axis=1)
     dist = np.take_along_axis(d, nearest[:, None], axis=1)[:, 0]
     counts = np.bincount(nearest, minlength=len(bg_planes))

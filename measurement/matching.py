@@ -427,11 +427,12 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
     where it starts), within ``link_px`` columns (times the rows of the gap beyond the first), and on
     that segment's light plane the two end points lie within ``tol_mm`` in depth. Stripes on a thin,
     steep part (a tail tip) break into short segments that no row neighbour reaches; seen from above, a
-    tail tip's first stripe broke with three rows missing and a 5 px jump (a 3072 px clean top
-    view: the group fell under 10 points and the body length to -8.9 %; -0.5 % once bridged). Only segments whose centres are mostly reliable peaks continue a stripe:
-    the fur's stray specks beside a stripe's end are one-sided or wide. With the ``lit`` projector cells
-    (``lit_cells``) a segment that would put more than a quarter of its cells on lit background does not
-    continue the stripe either: something else lit those projector rays."""
+    tail tip's first stripe broke with three rows missing and a 5 px jump (a 3072 px clean top view: the
+    group fell under 10 points and the body length to -8.9 %; -0.5 % once bridged). Only segments whose
+    centres are mostly reliable peaks continue a stripe: the fur's stray specks beside a stripe's end are
+    one-sided or wide. With the ``lit`` projector cells (``lit_cells``) a segment that would put more than
+    a quarter of its cells on lit background does not continue the stripe either: something else lit those
+    projector rays."""
     out: dict[int, int] = {}
     table = label_table(seg, seg_label)
     good = np.bincount(seg, weights=reliable(c), minlength=seg.max() + 1) >= 0.6 * np.bincount(

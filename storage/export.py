@@ -53,7 +53,9 @@ def wide_rows(session: Session, flt: ExportFilter) -> tuple[list[str], list[dict
     scans warned about (a cut-off animal, a faint coat or shadow, parts left unplaced), once each."""
     pairs = selected_sessions(session, flt)
     values = _latest_values([s.id for s, _ in pairs], session)
-    warned = _scan_warnings(session, [s.id for s, _ in pairs])
+    said: dict[int, dict[str, None]] = {}  # session -> its scans' warnings, once each, in scan order
+    for scan in _scans(session, [s.id for s, _ in pairs]):
+        said.setdefault(scan.session_id, {}).update(dict.fromkeys(scan.warnings))
     header = list(BASE) + _measure_columns(values) + ["scan_warnings"]
     rows = []
     for record, animal in pairs:
@@ -66,8 +68,7 @@ def wide_rows(session: Session, flt: ExportFilter) -> tuple[list[str], list[dict
             ref, val = values.get((record.id, name, "manual")), values.get((record.id, name, kind))
             if ref and val is not None:
                 row[key] = round((val - ref) / ref * 100.0, 2)
-        said = [w for _, sid, ws in warned for w in ws if sid == record.id]
-        row["scan_warnings"] = WARNINGS_SEP.join(dict.fromkeys(said)) or None
+        row["scan_warnings"] = WARNINGS_SEP.join(said.get(record.id, {})) or None
         rows.append(row)
     return header, rows
 
@@ -76,8 +77,7 @@ def long_rows(session: Session, flt: ExportFilter) -> tuple[list[str], list[dict
     """Header and one row per current measurement value, for herd-management software; a value from a
     scan carries that scan's warnings."""
     pairs = {s.id: (s, a) for s, a in selected_sessions(session, flt)}
-    views = dict(session.exec(select(Scan.id, Scan.view).where(Scan.session_id.in_(list(pairs)))).all())
-    warned = {scan_id: ws for scan_id, _, ws in _scan_warnings(session, list(pairs))}
+    scans = {scan.id: scan for scan in _scans(session, list(pairs))}
     rows = []
     for m in current_measurements(session, list(pairs)):
         record, animal = pairs[m.session_id]
@@ -85,24 +85,33 @@ def long_rows(session: Session, flt: ExportFilter) -> tuple[list[str], list[dict
             "animal_id": animal.id, "tag": animal.tag, "species": animal.species, "session_id": record.id,
             "date": record.date.isoformat(), "name": m.name, "kind": m.kind,
             "value_mm": None if m.value_mm is None else round(m.value_mm, 2), "method": m.method,
-            "who": m.created_by, "when": _iso(m.created_at), "scan_id": m.scan_id, "view": views.get(m.scan_id),
+            "who": m.created_by, "when": _iso(m.created_at), "scan_id": m.scan_id,
+            "view": scans[m.scan_id].view if m.scan_id in scans else None,
             "calibration_id": m.calibration_id, "software_version": m.software_version,
             "measurement_id": m.id, "revision": m.revision,
-            "scan_warnings": WARNINGS_SEP.join(warned.get(m.scan_id, [])) or None,
+            "scan_warnings": WARNINGS_SEP.join(scans[m.scan_id].warnings) or None if m.scan_id in scans else None,
         })
     rows.sort(key=lambda r: (r["tag"], r["date"], r["session_id"], r["name"], KINDS.index(r["kind"])
                              if r["kind"] in KINDS else 9))
     return list(LONG), rows
 
 
-def _scan_warnings(session: Session, session_ids: list[int]) -> list[tuple[int, int, list[str]]]:
-    """(scan, session, its warnings) for the scans of these sessions whose stored measurements have any."""
+@dataclass(frozen=True)
+class _ScanInfo:
+    id: int
+    session_id: int
+    view: str | None
+    warnings: tuple[str, ...]
+
+
+def _scans(session: Session, session_ids: list[int]) -> list[_ScanInfo]:
+    """The scans of these sessions (one query), in id order, with the warnings their measurements hold."""
     if not session_ids:
         return []
-    found = session.exec(select(Scan.id, Scan.session_id, Scan.measurements)
+    found = session.exec(select(Scan.id, Scan.session_id, Scan.view, Scan.measurements)
                          .where(Scan.session_id.in_(session_ids)).order_by(Scan.id)).all()
-    return [(scan_id, sid, [str(w) for w in (meas or {}).get("warnings") or []])
-            for scan_id, sid, meas in found if (meas or {}).get("warnings")]
+    return [_ScanInfo(scan_id, sid, view, tuple(str(w) for w in (meas or {}).get("warnings") or ()))
+            for scan_id, sid, view, meas in found]
 
 
 def _latest_values(session_ids: list[int], session: Session) -> dict[tuple[int, str, str], float]:

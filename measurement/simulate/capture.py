@@ -81,8 +81,8 @@ def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = T
     if floor not in FLOORS:
         raise ValueError(f"floor must be one of {', '.join(FLOORS)}, got {floor!r}")
     centre, target, up = (np.asarray(v, float) for v in VIEW_CAMERAS[view])
-    lift = np.array([0.0, camera_height, 0.0])
-    R, t = look_at(centre + lift, target if view == "top" or camera_aimed else target + lift, up)
+    up_by = np.array([0.0, camera_height, 0.0])
+    R, t = look_at(centre + up_by, target if view == "top" or camera_aimed else target + up_by, up)
     to_world = lambda p: (p - t) @ R  # noqa: E731  camera -> world
 
     def fur_albedo(points: np.ndarray) -> np.ndarray:
