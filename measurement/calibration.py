@@ -16,6 +16,7 @@ from .board import BoardParams, abc_to_plane, find_corners, fit_plane_abc, objec
 from .camera import Intrinsics, rays
 from .capture import Capture
 from .errors import CalibrationError, StripeDetectionError
+from .orientation import AXES, stripe_axis, swap_xy, transpose_image
 from .planes import fit_planes_detailed, plane_error_e2, planes_to_abc, point_plane_distance
 from .stripes import StripeParams, detect_board_stripes
 
@@ -25,17 +26,32 @@ class Calibration:
     """What a scan needs from a calibration.
 
     intrinsics : camera model
-    planes     : (N, 4) float64 [nx, ny, nz, d] with n.X = d (mm, camera frame), left to right; None if camera-only
+    planes     : (N, 4) float64 [nx, ny, nz, d] with n.X = d (mm, camera frame), left to right (top to bottom
+                 when the stripes run across the image); None if camera-only
     meta       : the rest of calibration.json (errors, poses, ...)
+    stripe_axis: "vertical" (the paper's rig: the stripes run down the image) or "horizontal"
+    transposed : whether this is the frame a horizontal-stripe rig is measured in (``in_row_frame``):
+                 the image's rows and columns swapped, and with them x and y of rays, planes and points
     """
 
     intrinsics: Intrinsics
     planes: np.ndarray | None
     meta: dict = field(default_factory=dict)
+    stripe_axis: str = "vertical"
+    transposed: bool = False
 
     @property
     def stripes(self) -> int:
         return 0 if self.planes is None else len(self.planes)
+
+    def in_row_frame(self) -> Calibration:
+        """This calibration in the frame whose image rows cross the stripes: itself for vertical stripes;
+        for horizontal ones, the transposed frame (planes with x and y swapped; ``transposed`` set, which
+        ``triangulation.ray_table`` and the scan read)."""
+        if self.stripe_axis == "vertical" or self.transposed:
+            return self
+        planes = None if self.planes is None else swap_xy(self.planes)
+        return Calibration(self.intrinsics, planes, self.meta, "vertical", True)
 
 
 def load_calibration(src: str | Path | dict) -> Calibration:
@@ -61,7 +77,10 @@ def load_calibration(src: str | Path | dict) -> Calibration:
         raise CalibrationError(f"{name}: missing or malformed field ({exc})") from None
     if planes is not None and not np.all(np.isfinite(planes)):
         raise CalibrationError(f"{name}: planes hold non-finite numbers")
-    return Calibration(intr, planes, {k: v for k, v in data.items() if k != "planes"})
+    axis = data.get("stripe_axis") or "vertical"  # calibrations made before it was recorded: the paper's rig
+    if axis not in AXES:
+        raise CalibrationError(f"{name}: stripe_axis must be one of {', '.join(AXES)}, got {axis!r}")
+    return Calibration(intr, planes, {k: v for k, v in data.items() if k != "planes"}, axis)
 
 
 def load_intrinsics(src: str | Path | dict) -> Intrinsics:
@@ -136,10 +155,11 @@ class CalibrationResult:
     plane_points: np.ndarray | None = None
     plane_method: str | None = None
     stripe_method: str | None = None
+    stripe_axis: str = "vertical"
     seconds: float = 0.0
 
     def calibration(self) -> Calibration:
-        return Calibration(self.intrinsics, self.planes, self.to_dict())
+        return Calibration(self.intrinsics, self.planes, self.to_dict(), self.stripe_axis)
 
     def to_dict(self) -> dict:
         d = {
@@ -152,6 +172,7 @@ class CalibrationResult:
             "plane_rms_mm": None if self.plane_rms_mm is None else self.plane_rms_mm.tolist(),
             "plane_points": None if self.plane_points is None else self.plane_points.tolist(),
             "stripes": 0 if self.planes is None else len(self.planes),
+            "stripe_axis": self.stripe_axis,
             "plane_method": self.plane_method,
             "stripe_method": self.stripe_method,
             "rig": self.rig,
@@ -212,16 +233,17 @@ def calibrate(capture: Capture, intrinsics: Intrinsics | None = None, params: Ca
     e1 = float(np.sqrt(total_sq / sum(len(corners[n]) for n in errors)))
     groups: list[list[np.ndarray]] = [[] for _ in range(rig.stripes)]
     report(0.6, "finding stripe centres on the board")
+    axis = _stripe_axis(capture, corners)
     with ThreadPoolExecutor(max_workers=_WORKERS) as pool:
-        done = list(pool.map(lambda p: _pose_stripes(p, corners, extr, errors, reasons, intr, rig, pattern, params),
-                             capture.poses))
+        done = list(pool.map(lambda p: _pose_stripes(p, corners, extr, errors, reasons, intr, rig, pattern, params,
+                                                     axis), capture.poses))
     pose_reports = [r for r, _ in done]
     for _, pts_by_stripe in done:
         for k, pts in enumerate(pts_by_stripe):
             groups[k].append(pts)
     have_stripes = any(p.stripes is not None for p in capture.poses)
     result = dict(intrinsics=intr, reprojection_error_px=e1, poses=pose_reports, rig=rig.to_dict(),
-                  stripe_method=params.stripes.method)
+                  stripe_method=params.stripes.method, stripe_axis=axis)
     if not have_stripes:
         return CalibrationResult(**result, seconds=time.perf_counter() - t0)
     plane_poses = [p for p in pose_reports if p.used_for_planes]
@@ -231,7 +253,12 @@ def calibrate(capture: Capture, intrinsics: Intrinsics | None = None, params: Ca
                                f"board, found {len(plane_poses)} ({why})")
     report(0.92, f"fitting {rig.stripes} light planes ({params.plane_method})")
     stacked = [np.vstack(g) for g in groups]
-    planes, masks, independent = fit_planes_detailed(stacked, params.plane_method)
+    if axis == "horizontal":  # fitted in the transposed frame, where the planes are ordered (and oriented)
+        # left to right as the paper's are, then swapped back
+        planes_t, masks, independent_t = fit_planes_detailed([swap_xy(g) for g in stacked], params.plane_method)
+        planes, independent = swap_xy(planes_t), swap_xy(independent_t)
+    else:
+        planes, masks, independent = fit_planes_detailed(stacked, params.plane_method)
     rms = np.array([np.sqrt(np.mean(point_plane_distance(g[m], p) ** 2))
                     for g, m, p in zip(stacked, masks, planes, strict=True)])
     report(1.0, "done")
@@ -290,9 +317,17 @@ def _camera(corners, square_mm, pattern, size, intrinsics, reasons, params):
         return intr, extr, errors
 
 
-def _pose_stripes(pose, corners, extr, errors, reasons, intr, rig, pattern, params
+def _stripe_axis(capture: Capture, corners: dict) -> str:
+    """Which way the calibration's stripes run (``orientation.stripe_axis``): the majority over the poses
+    whose board was found and which have a stripe image (vertical when none has)."""
+    votes = [stripe_axis(p.stripes, p.board) for p in capture.poses if p.stripes is not None and p.name in corners]
+    return "horizontal" if votes.count("horizontal") > len(votes) / 2 else "vertical"
+
+
+def _pose_stripes(pose, corners, extr, errors, reasons, intr, rig, pattern, params, axis: str = "vertical"
                   ) -> tuple[PoseReport, list[np.ndarray]]:
-    """One pose's report and its stripe centres on the board plane, grouped by stripe ((M_k, 3) mm each)."""
+    """One pose's report and its stripe centres on the board plane, grouped by stripe ((M_k, 3) mm each).
+    With ``axis`` "horizontal" the stripes are found in the transposed images (labelled top to bottom)."""
     if pose.name not in extr:
         return PoseReport(pose.name, False, reason=reasons.get(pose.name)), []
     R, t = extr[pose.name]
@@ -304,11 +339,21 @@ def _pose_stripes(pose, corners, extr, errors, reasons, intr, rig, pattern, para
     if pose.stripes is None:
         return PoseReport(**base, reason="no stripe image"), []
     try:
-        found = detect_board_stripes(pose.stripes, pose.board, corners[pose.name], pattern, rig.stripes,
-                                     params.stripes, pose.stripes_file or pose.name)
+        if axis == "horizontal":
+            cols, rows = pattern
+            grid_t = corners[pose.name].reshape(rows, cols, 2).transpose(1, 0, 2)[..., ::-1].reshape(-1, 2)
+            found = detect_board_stripes(transpose_image(pose.stripes),
+                                         None if pose.board is None else transpose_image(pose.board),
+                                         np.ascontiguousarray(grid_t), (rows, cols), rig.stripes, params.stripes,
+                                         pose.stripes_file or pose.name)
+            uv = found.uv[:, ::-1]
+        else:
+            found = detect_board_stripes(pose.stripes, pose.board, corners[pose.name], pattern, rig.stripes,
+                                         params.stripes, pose.stripes_file or pose.name)
+            uv = found.uv
     except StripeDetectionError as exc:
         return PoseReport(**base, reason=str(exc)), []
-    pts = backproject_to_plane(found.uv, plane, intr)
+    pts = backproject_to_plane(uv, plane, intr)
     by_stripe = [pts[found.stripe == k] for k in range(rig.stripes)]
     report = PoseReport(**base, used_for_planes=True, stripe_rows=found.rows_used, stripe_points=len(pts))
     return report, by_stripe

@@ -15,8 +15,9 @@ import numpy as np
 from .body import BodyParams, isolate, measure
 from .calibration import Calibration
 from .detection import DetectionParams, check_image, detect_centres, reliable
-from .errors import ScanError
+from .errors import ImageError, ScanError
 from .matching import Labels, MatchingParams, denoise, label_centres, smooth_along_segments
+from .orientation import stripe_axis, swap_xy, transpose_image
 from .threads import one_blas_thread
 from .triangulation import cloud_points, ray_table, rays_and_cells
 
@@ -55,10 +56,37 @@ def scan(image: np.ndarray, calibration: Calibration, view: str = "side", ambien
     """Reconstruct the animal in one decoded stripe image (H, W) uint8/uint16.
 
     Raises ScanError/ImageError/StripeDetectionError with a message a technician can act on. The matrix
-    products run on one BLAS thread (``threads.one_blas_thread``).
+    products run on one BLAS thread (``threads.one_blas_thread``). A rig whose stripes run across the image
+    (``calibration.stripe_axis`` "horizontal": the projector above or below the camera) is scanned in the
+    transposed image (``orientation``); the result is in the camera's own frame and pixels either way.
     """
     with one_blas_thread():
+        if calibration.stripe_axis == "horizontal" and not calibration.transposed:
+            image = np.asarray(image)
+            check_image(image, calibration.intrinsics.image_size)  # sizes named as the camera has them
+            if ambient is not None and np.asarray(ambient).shape[:2] != image.shape[:2]:
+                a = np.asarray(ambient)
+                raise ImageError(f"ambient image is {a.shape[1]}x{a.shape[0]}, the stripe image "
+                                 f"{image.shape[1]}x{image.shape[0]}")
+            r = _scan(transpose_image(image), calibration.in_row_frame(), view,
+                      None if ambient is None else transpose_image(ambient), params)
+            return _swapped(r)
         return _scan(image, calibration, view, ambient, params)
+
+
+def _swapped(r: ScanResult) -> ScanResult:
+    """A result of the transposed frame in the camera's own: x and y of points, u and v of pixels, and the
+    3-D points and axes kept with the measurements, swapped back."""
+    meas = dict(r.measurements)
+    for name in ("body_height", "body_width", "body_length"):
+        if isinstance(meas.get(name), dict) and meas[name].get("points"):
+            meas[name] = {**meas[name], "points": swap_xy(np.array(meas[name]["points"])).tolist()}
+    box = meas.get("oriented_box_mm")
+    if isinstance(box, dict):
+        meas["oriented_box_mm"] = {**box, "axes": swap_xy(np.array(box["axes"])).tolist(),
+                                   "centre": swap_xy(np.array(box["centre"])).tolist()}
+    return ScanResult(swap_xy(r.points), r.stripe, r.uv[:, ::-1].copy(), swap_xy(r.scene_points), r.scene_stripe,
+                      r.scene_uv[:, ::-1].copy(), meas, r.timings_ms)
 
 
 def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.ndarray | None,
@@ -69,14 +97,15 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     if calibration.planes is None or calibration.stripes == 0:
         raise ScanError("the calibration has no light planes (camera-only): calibrate with stripe images first")
     image = np.asarray(image)
-    check_image(image, calibration.intrinsics.image_size)
+    size = calibration.intrinsics.image_size
+    check_image(image, (size[1], size[0]) if calibration.transposed else size)
     t = {"start": time.perf_counter()}
     centres = detect_centres(image, params.detection, ambient)
     t["detect"] = time.perf_counter()
     if len(centres) and params.matching.denoise:
         centres = centres.take(denoise(centres, image.shape[:2]))
     t["denoise"] = time.perf_counter()
-    table = ray_table(calibration.intrinsics)
+    table = ray_table(calibration.intrinsics, calibration.transposed)
     looked_up: list = []  # the centres' rays and table cells, looked up while matching links the segments
 
     def rays() -> np.ndarray:
@@ -96,6 +125,11 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
         hint = ("is this calibration for this rig and stripe count, and do all its stripes fall inside the "
                 "image (the indices are read from rows that show every stripe)?" if n_found < calibration.stripes
                 else "is this calibration for this rig and stripe count?")
+        if stripe_axis(image) == "horizontal":  # in the frame scanned: the calibration's stripes run down it
+            axis = "across" if calibration.transposed else "down"
+            other = "down" if calibration.transposed else "across"
+            hint = (f"the stripes in this image run {other} it, the calibration's {axis} it: was the image taken "
+                    "with this rig (the camera turned, or the projector moved above or beside it)?")
         raise ScanError(f"no stripe could be matched to the calibration's {calibration.stripes} light planes "
                         f"(rows show about {n_found} stripes): {hint}")
     idx = np.flatnonzero(ok)
@@ -119,7 +153,8 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     on_animal = idx[animal]
     meas["animal_contrast"] = (round(float(np.median(centres.contrast.take(on_animal))), 1)
                                if len(on_animal) >= 200 else None)
-    meas["frame_edges"] = frame_edges(uv[animal], image.shape[:2])
+    meas["frame_edges"] = (frame_edges(uv[animal][:, ::-1], image.shape[1::-1][-2:]) if calibration.transposed
+                           else frame_edges(uv[animal], image.shape[:2]))
     meas["warnings"] = _warnings(meas, labels)
     return ScanResult(animal_pts, animal_stripe, uv[animal], pts, stripe, uv, meas, timings)
 

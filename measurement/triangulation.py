@@ -13,18 +13,22 @@ from .camera import Intrinsics, ray_grid
 
 
 @lru_cache(maxsize=4)
-def _ray_table(key: tuple) -> np.ndarray:
+def _ray_table(key: tuple, transposed: bool = False) -> np.ndarray:
+    if transposed:
+        return np.ascontiguousarray(_ray_table(key).transpose(1, 0, 2)[..., ::-1])
     K = np.array(key[0]).reshape(3, 3)
     dist = np.array(key[1])
     intr = Intrinsics(K, dist, (key[2], key[3]))
     return ray_grid(intr).astype(np.float32)
 
 
-def ray_table(intr: Intrinsics) -> np.ndarray:
-    """(H, W, 2) float32 normalised (x, y) of every pixel centre, cached per camera."""
+def ray_table(intr: Intrinsics, transposed: bool = False) -> np.ndarray:
+    """(H, W, 2) float32 normalised (x, y) of every pixel centre, cached per camera. ``transposed``: the
+    table of the transposed image and camera frame (``orientation``): (W, H, 2), entry [u, v] holding
+    (y, x) of pixel (u, v) (any distortion model, exactly)."""
     key = (tuple(np.round(intr.camera_matrix.ravel(), 9)), tuple(np.round(intr.dist_coeffs.ravel(), 12)),
            int(intr.image_size[0]), int(intr.image_size[1]))
-    return _ray_table(key)
+    return _ray_table(key, transposed)
 
 
 def rays_at(u: np.ndarray, v: np.ndarray, table: np.ndarray) -> np.ndarray:

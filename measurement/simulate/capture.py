@@ -245,3 +245,42 @@ def _rig_truth(rig: Rig, board: Board) -> dict:
         "board_poses": [],
         "views": {},
     }
+
+
+def transpose_capture(src: str | Path, dst: str | Path) -> Path:
+    """Copy a capture with every image transposed (rows and columns swapped): the capture of a rig whose
+    projector sits below the camera and casts stripes across the image (the transposed images are exactly
+    what a camera with swapped axes sees of the mirrored scene, a valid scene in its own right; the
+    chessboard is found with the same inner-corner count). rig.json is copied. Of the truth, truth.json
+    (intrinsics, planes, ``stripe_axis``), the stripe points and the animal meshes are swapped: x and y of
+    points and planes, u and v of pixels (the light planes then run top to bottom); the per-view json
+    and the board poses are not. Returns ``dst``."""
+    src, dst = Path(src), Path(dst)
+    for sub in ("calib", "scan"):
+        (dst / sub).mkdir(parents=True, exist_ok=True)
+        for f in sorted((src / sub).iterdir()) if (src / sub).exists() else []:
+            img = cv2.imread(str(f), cv2.IMREAD_UNCHANGED)
+            if img is None:
+                continue
+            cv2.imwrite(str(dst / sub / f.name), np.ascontiguousarray(np.swapaxes(img, 0, 1)))
+    (dst / "rig.json").write_text((src / "rig.json").read_text())
+    if (src / "truth").exists():
+        (dst / "truth").mkdir(exist_ok=True)
+        truth = json.loads((src / "truth" / "truth.json").read_text())
+        K = np.array(truth["camera_matrix"])
+        truth["camera_matrix"] = [[K[1, 1], 0.0, K[1, 2]], [0.0, K[0, 0], K[0, 2]], [0.0, 0.0, 1.0]]
+        dist = list(truth["dist_coeffs"])
+        dist[2], dist[3] = dist[3], dist[2]  # p1 and p2 trade places (5-coefficient model)
+        truth["dist_coeffs"] = dist
+        truth["image_size"] = list(truth["image_size"])[::-1]
+        truth["planes"] = np.array(truth["planes"])[:, [1, 0, 2, 3]].tolist()
+        truth["stripe_axis"] = "horizontal"
+        (dst / "truth" / "truth.json").write_text(json.dumps(truth))
+        for f in (src / "truth").glob("*_stripes.npz"):
+            t = dict(np.load(f))
+            t["points"], t["uv"] = t["points"][:, [1, 0, 2]], t["uv"][:, ::-1]
+            np.savez_compressed(dst / "truth" / f.name, **t)
+        for f in (src / "truth").glob("*_animal.ply"):
+            mesh: trimesh.Trimesh = trimesh.load(f, force="mesh", process=False)  # type: ignore[assignment]
+            trimesh.Trimesh(mesh.vertices[:, [1, 0, 2]], mesh.faces[:, ::-1], process=False).export(dst / "truth" / f.name)
+    return dst
