@@ -1,7 +1,8 @@
 """Stripe-label correctness on other rig geometries: projector left of the camera, a narrower and a
 wider baseline than the reference rig's 250 mm, and the rig 150 mm lower or 200 mm higher (the side camera
 keeps its viewing direction, so 200 mm higher cuts the feet off at the bottom of the picture; the top
-camera comes 150 mm nearer the floor or goes 200 mm farther), or 450 mm higher and aimed down at the animal.
+camera comes 150 mm nearer the floor or goes 200 mm farther), or 450 mm higher and aimed down at the animal;
+and the projector turned 10 degrees either way about its axis (stripes slanted in the image).
 
     python bench/geometry.py [--size 1536x1024] [--cache /tmp/bodyscan-bench]
 
@@ -22,6 +23,7 @@ from bench.common import cached_capture, print_pieces, summary  # noqa: E402
 from measurement.simulate.rig import default_rig  # noqa: E402
 
 GEOMETRIES = {"left": -250.0, "narrow": 150.0, "wide": 400.0}  # projector baseline, mm (negative: left)
+ROLLS = {"roll+10": 10.0, "roll-10": -10.0}  # the projector turned about its axis: slanted stripes, degrees
 HEIGHTS = {"low": ({"camera_height": -150.0}), "high": ({"camera_height": 200.0}),  # the rig's height, mm
            "aimed": ({"camera_height": 450.0, "camera_aimed": True})}
 RENDERS = ((40, True, 21), (50, False, 22))
@@ -40,6 +42,12 @@ def main() -> None:
             label = f"{name}-{stripes}-{'fur' if fur else 'clean'}-{seed}"
             cap = cached_capture(Path(args.cache) / f"geometry-{size[0]}x{size[1]}-{label}", stripes=stripes,
                                  size=size, seed=seed, fur=fur, rig=default_rig(size, stripes, baseline_mm=baseline))
+            rights += print_pieces(label, cap)
+    for name, roll in ROLLS.items():
+        for stripes, fur, seed in RENDERS:
+            label = f"{name}-{stripes}-{'fur' if fur else 'clean'}-{seed}"
+            cap = cached_capture(Path(args.cache) / f"geometry-{size[0]}x{size[1]}-{label}", stripes=stripes,
+                                 size=size, seed=seed, fur=fur, rig=default_rig(size, stripes, roll_deg=roll))
             rights += print_pieces(label, cap)
     for name, scene in HEIGHTS.items():
         for stripes, fur, seed in RENDERS:

@@ -64,10 +64,11 @@ class Rig:
 
 
 def default_rig(size: tuple[int, int] = (3072, 2048), stripes: int = 40, baseline_mm: float = 250.0,
-                aim_mm: float = 1150.0) -> Rig:
+                aim_mm: float = 1150.0, roll_deg: float = 0.0) -> Rig:
     """The reference rig: 8 mm lens on 2.4 um pixels (scaled to ``size``), projector ``baseline_mm`` to the
     right, toed in to meet the camera axis at ``aim_mm``; ``stripes`` stripes over a fixed fan (about 13 mm
-    apart at 1.25 m for 40 stripes)."""
+    apart at 1.25 m for 40 stripes). ``roll_deg``: the projector turned about its own axis (its stripes
+    then slant in the image; positive turns them clockwise as the camera sees them)."""
     w, h = size
     scale = w / FULL_WIDTH
     f = FOCAL_MM / PIXEL_MM * scale
@@ -78,7 +79,9 @@ def default_rig(size: tuple[int, int] = (3072, 2048), stripes: int = 40, baselin
     pitch = np.deg2rad(1.5)
     R_yaw = np.array([[np.cos(yaw), 0, np.sin(yaw)], [0, 1, 0], [-np.sin(yaw), 0, np.cos(yaw)]])
     R_pitch = np.array([[1, 0, 0], [0, np.cos(pitch), -np.sin(pitch)], [0, np.sin(pitch), np.cos(pitch)]])
-    R = R_pitch @ R_yaw
+    roll = np.deg2rad(roll_deg)
+    R_roll = np.array([[np.cos(roll), -np.sin(roll), 0], [np.sin(roll), np.cos(roll), 0], [0, 0, 1]])
+    R = R_roll @ R_pitch @ R_yaw
     centre = np.array([baseline_mm, -12.0, 8.0])
     t = -R @ centre
     spacing = 0.0105 * 39 / max(stripes - 1, 1)
