@@ -22,6 +22,7 @@ import numpy as np
 
 from . import _kernels
 from .errors import ImageError, StripeDetectionError
+from .images import sample_bits
 from .threads import band_workers
 
 
@@ -109,9 +110,11 @@ def _median_width(width: np.ndarray) -> float:
     return float(np.median(width))
 
 
-def to_gray8(image: np.ndarray, name: str = "image") -> np.ndarray:
-    """(H, W), (H, W, 1), (H, W, 3) or (H, W, 4) uint8/uint16 -> (H, W) uint8 (16-bit scaled by 1/257);
-    ImageError, naming the image as ``name``, for any other shape or type."""
+def to_gray8(image: np.ndarray, name: str = "image", bits: int | None = None) -> np.ndarray:
+    """(H, W), (H, W, 1), (H, W, 3) or (H, W, 4) uint8/uint16 -> (H, W) uint8; ImageError, naming the image
+    as ``name``, for any other shape or type. A 16-bit frame is scaled from the ``bits`` its samples use
+    (``sample_bits`` of the frame itself by default) to 0-255: a full 16-bit frame by 1/257, 12-bit samples
+    by 1/16.06 (scaled by 1/257 they kept 16 gray levels and no stripe was found)."""
     if image.dtype not in (np.uint8, np.uint16):
         raise ImageError(f"{name} must be uint8 or uint16, got {image.dtype}")
     if image.ndim == 3 and image.shape[2] == 1:
@@ -121,7 +124,8 @@ def to_gray8(image: np.ndarray, name: str = "image") -> np.ndarray:
     if image.ndim != 2:
         raise ImageError(f"{name} must be (H, W) gray or (H, W, 3) colour, got shape {image.shape}")
     if image.dtype == np.uint16:
-        return cv2.convertScaleAbs(image, alpha=1.0 / 257.0)
+        bits = sample_bits(image) if bits is None else bits
+        return cv2.convertScaleAbs(image, alpha=255.0 / float(2**bits - 1))
     return image
 
 
@@ -138,9 +142,10 @@ def detect_centres(image: np.ndarray, params: DetectionParams = DetectionParams(
     ambient : optional image of the same view with the projector off; subtracting it cancels room light
               and, with the stripe image, most of the albedo's texture
     """
-    g = to_gray8(image)
+    bits = sample_bits(np.asarray(image))  # the ambient image is scaled as the stripe image is
+    g = to_gray8(image, bits=bits)
     if ambient is not None:
-        a = to_gray8(ambient, "ambient image")
+        a = to_gray8(ambient, "ambient image", bits=bits)
         if a.shape != g.shape:
             raise ImageError(f"ambient image is {a.shape[1]}x{a.shape[0]}, the stripe image {g.shape[1]}x{g.shape[0]}")
         # stripes only add light: an ambient image brighter than the stripe image beyond a flicker's 2 % is
@@ -375,9 +380,10 @@ def algorithm2_centres(image: np.ndarray, window: int = 3, ratio: float = 0.5, l
     image : (H, W) uint8/uint16. ``u`` is the boundary midpoint in pixel-centre coordinates (no sub-pixel
     refinement: that is the baseline the pipeline's centroid is measured against).
     """
-    g = to_gray8(image)
+    bits = sample_bits(np.asarray(image))
+    g = to_gray8(image, bits=bits)
     if ambient is not None:
-        g = cv2.subtract(g, to_gray8(ambient))
+        g = cv2.subtract(g, to_gray8(ambient, bits=bits))
     binary, _ = binarize_local(g, local_px, offset)
     rows, left, right = algorithm2_boundaries(binary, window, ratio)
     width = (right - left).astype(np.float32)

@@ -56,10 +56,22 @@ def to_gray(img: np.ndarray, name: str = "image") -> np.ndarray:
     return np.clip(img, 0, 65535).astype(np.uint16)
 
 
-def to_float(img: np.ndarray) -> np.ndarray:
-    """Scale an 8- or 16-bit gray image to float32 in the 0..255 range (16-bit is divided by 257)."""
+def sample_bits(image: np.ndarray) -> int:
+    """How many bits a 16-bit frame's samples use: 8, 10, 12, 14 or 16, the fewest that hold its largest
+    value (a camera's 10-, 12- or 14-bit samples are often written unshifted into 16-bit PNG or TIFF files;
+    the paper's camera gives Mono8 or Mono12). 8 for an 8-bit frame."""
+    if image.dtype != np.uint16 or image.size == 0:
+        return 8
+    used = int(image.max()).bit_length()
+    return min(max(used + used % 2, 8), 16)
+
+
+def to_float(img: np.ndarray, bits: int | None = None) -> np.ndarray:
+    """Scale an 8- or 16-bit gray image to float32 in the 0..255 range: 16-bit from the ``bits`` its samples
+    use (``sample_bits`` of the image by default; a full 16-bit image is divided by 257)."""
     if img.dtype == np.uint16:
-        return img.astype(np.float32) * (1.0 / 257.0)
+        bits = sample_bits(img) if bits is None else bits
+        return img.astype(np.float32) * np.float32(255.0 / float(2**bits - 1))
     if img.dtype == np.float32:
         return img
     return img.astype(np.float32)

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from .errors import StripeDetectionError
-from .images import to_float
+from .images import sample_bits, to_float
 
 METHODS = ("paper", "midpoint", "weighted", "gaussian")
 
@@ -266,6 +266,11 @@ def detect_board_stripes(stripes_img: np.ndarray, board_img: np.ndarray | None, 
     """
     if params.method not in METHODS:
         raise ValueError(f"method must be one of {METHODS}, got {params.method!r}")
+    # both images on one scale, that of the stripe image's samples (12-bit samples in a 16-bit file scaled
+    # by 1/257 kept 16 gray levels: a tenth of the rows showed every stripe)
+    bits = sample_bits(stripes_img)
+    stripes_img = to_float(stripes_img, bits)
+    board_img = None if board_img is None else to_float(board_img, bits)
     region = board_region(corners, pattern, stripes_img.shape, board_img)
     ys, xs = np.nonzero(region.any(axis=1))[0], np.nonzero(region.any(axis=0))[0]
     if len(ys) == 0:

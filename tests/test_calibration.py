@@ -131,3 +131,20 @@ def test_a_malformed_calibration_is_a_calibration_error_naming_it(tmp_path):
         load_calibration(tmp_path / "calibration.json")
     with pytest.raises(CalibrationError, match="not list"):
         load_calibration([good])
+
+
+def test_twelve_bit_samples_in_sixteen_bit_files_calibrate_as_the_eight_bit_capture(small_capture, small_calibration,
+                                                                                    tmp_path):
+    """A Mono12 camera's frames written unshifted into 16-bit PNGs (values 0-4095): before, the stripe images
+    were scaled by 1/257 to 16 gray levels and each pose kept a tenth of its rows showing every stripe."""
+    import cv2
+
+    cap = tmp_path / "cap"
+    shutil.copytree(small_capture, cap)
+    for f in sorted((cap / "calib").glob("*.png")):
+        img = cv2.imread(str(f), cv2.IMREAD_UNCHANGED)
+        cv2.imwrite(str(f), np.round(img.astype(np.float64) * 4095.0 / 255.0).astype(np.uint16))
+    twelve = calibrate(read_capture(cap))
+    for a, b in zip(twelve.poses, small_calibration.poses, strict=True):  # the rounding to 12 bits moves a few
+        assert abs(a.stripe_rows - b.stripe_rows) <= 0.02 * b.stripe_rows
+    assert np.abs(twelve.planes - small_calibration.planes).max() < 0.01

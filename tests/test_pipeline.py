@@ -264,6 +264,23 @@ def test_sixteen_bit_and_colour_frames_scan_as_their_eight_bit_gray(small_captur
         np.testing.assert_allclose(r.points, gray.points)
 
 
+def test_twelve_bit_samples_in_a_sixteen_bit_frame_scan_as_the_eight_bit_frame(small_capture, truth_cal):
+    """A machine-vision camera's Mono12 frame written unshifted into a 16-bit file (values 0-4095), with its
+    ambient image: before, both were scaled by 1/257 to 16 gray levels and no stripe was found."""
+    img = read_image(small_capture / "scan" / "side.png")
+    ambient = read_image(small_capture / "scan" / "side_ambient.png")
+    assert img.max() == 255
+
+    def twelve(a):
+        return np.round(a.astype(np.float64) * 4095.0 / 255.0).astype(np.uint16)
+
+    for amb in (None, ambient):
+        eight = scan(img, truth_cal, "side", ambient=amb)
+        r = scan(twelve(img), truth_cal, "side", ambient=None if amb is None else twelve(amb))
+        np.testing.assert_array_equal(r.stripe, eight.stripe)
+        np.testing.assert_allclose(r.points, eight.points)
+
+
 def test_scans_in_several_threads_at_once_give_each_its_own_result(small_capture, truth_cal):
     """The scan's helper threads (detection's bands, the second core) are shared by every scan in the
     process: scans from several threads at once queue on them and each gets what it gets alone."""
