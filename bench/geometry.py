@@ -37,24 +37,18 @@ def main() -> None:
     size = tuple(int(v) for v in args.size.split("x"))
     rights: list[float] = []
     print("rig                       view  labelled  right    pieces (centres: chosen offset / true)")
-    for name, baseline in GEOMETRIES.items():
-        for stripes, fur, seed in RENDERS:
-            label = f"{name}-{stripes}-{'fur' if fur else 'clean'}-{seed}"
-            cap = cached_capture(Path(args.cache) / f"geometry-{size[0]}x{size[1]}-{label}", stripes=stripes,
-                                 size=size, seed=seed, fur=fur, rig=default_rig(size, stripes, baseline_mm=baseline))
-            rights += print_pieces(label, cap)
-    for name, roll in ROLLS.items():
-        for stripes, fur, seed in RENDERS:
-            label = f"{name}-{stripes}-{'fur' if fur else 'clean'}-{seed}"
-            cap = cached_capture(Path(args.cache) / f"geometry-{size[0]}x{size[1]}-{label}", stripes=stripes,
-                                 size=size, seed=seed, fur=fur, rig=default_rig(size, stripes, roll_deg=roll))
-            rights += print_pieces(label, cap)
-    for name, scene in HEIGHTS.items():
-        for stripes, fur, seed in RENDERS:
-            label = f"{name}-{stripes}-{'fur' if fur else 'clean'}-{seed}"
-            cap = cached_capture(Path(args.cache) / f"geometry-{size[0]}x{size[1]}-{label}", stripes=stripes,
-                                 size=size, seed=seed, fur=fur, scene=scene)
-            rights += print_pieces(label, cap)
+    variants = ([(name, {"rig": default_rig(size, stripes, baseline_mm=baseline)}, stripes)
+                 for name, baseline in GEOMETRIES.items() for stripes, _, _ in RENDERS]
+                + [(name, {"rig": default_rig(size, stripes, roll_deg=roll)}, stripes)
+                   for name, roll in ROLLS.items() for stripes, _, _ in RENDERS]
+                + [(name, {"scene": scene}, stripes) for name, scene in HEIGHTS.items() for stripes, _, _ in RENDERS])
+    renders = {stripes: (fur, seed) for stripes, fur, seed in RENDERS}
+    for name, how, stripes in variants:
+        fur, seed = renders[stripes]
+        label = f"{name}-{stripes}-{'fur' if fur else 'clean'}-{seed}"
+        cap = cached_capture(Path(args.cache) / f"geometry-{size[0]}x{size[1]}-{label}", stripes=stripes,
+                             size=size, seed=seed, fur=fur, **how)
+        rights += print_pieces(label, cap)
     print(summary(rights))
 
 if __name__ == "__main__":
