@@ -63,3 +63,24 @@ def test_a_mesh_is_stood_up_by_its_extents_whatever_axis_its_file_calls_up(tmp_p
     ext = a.vertices.max(axis=0) - a.vertices.min(axis=0)
     np.testing.assert_allclose(ext, [600.0, 200.0, 80.0], atol=1e-9)
     assert a.vertices[:, 1].min() == 0.0
+
+
+def test_the_camera_steps_back_along_its_viewing_direction_and_the_projector_turns_about_its_axis():
+    import numpy as np
+
+    from measurement.simulate.animal import quadruped
+    from measurement.simulate.capture import animal_scene
+    from measurement.simulate.rig import default_rig
+
+    animal = quadruped(seed=1)
+    _, R0, t0 = animal_scene(animal, "side", fur=False, seed=1)
+    _, R1, t1 = animal_scene(animal, "side", fur=False, seed=1, camera_back=400.0)
+    c0, c1 = -R0.T @ t0, -R1.T @ t1  # camera centres in the world
+    assert np.allclose(R0, R1)  # the same viewing direction
+    assert np.allclose(c1 - c0, -400.0 * R0[2])  # 400 mm back along it
+    rig, turned = default_rig((768, 512), 40), default_rig((768, 512), 40, roll_deg=10.0)
+    assert np.allclose(rig.projector.centre_cam, turned.projector.centre_cam)
+    # the stripe planes turn by 10 degrees about the projector's axis: their normals' image-plane direction
+    n0, n1 = rig.projector.planes_cam()[20, :2], turned.projector.planes_cam()[20, :2]
+    angle = np.degrees(np.arccos(n0 @ n1 / np.linalg.norm(n0) / np.linalg.norm(n1)))
+    assert 8.0 < angle < 12.0

@@ -64,7 +64,8 @@ def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = T
                  floor_albedo: float | None = None, floor: str = "mottled",
                  box: tuple[float, float] | None = None, coat: float = 1.0,
                  platform: float | None = None, rails: float | None = None,
-                 camera_height: float = 0.0, camera_aimed: bool = False) -> tuple[list, np.ndarray, np.ndarray]:
+                 camera_height: float = 0.0, camera_aimed: bool = False, camera_back: float = 0.0
+                 ) -> tuple[list, np.ndarray, np.ndarray]:
     """Surfaces of a scan scene in camera coordinates plus the camera pose (R_cam_world, t_cam_world).
     ``wall`` : the view's wall, if it has one; ``floor_albedo`` : a uniform floor instead of the mottled one;
     ``floor`` : the floor's pattern: "mottled" (slow blotches), "concrete" (the blotches plus a fine-grained
@@ -77,11 +78,14 @@ def animal_scene(animal: Animal, view: str, fur: bool, seed: int, wall: bool = T
     and 400 mm (kind "background"; -300 puts them between the animal and the side camera); ``camera_height``
     : mm added to the camera's height (the projector moves with it): a side, front or back camera keeps its
     viewing direction (its target moves too) unless ``camera_aimed`` (then it tilts to keep the animal
-    centred); the top camera's distance to the floor changes by as much."""
+    centred); the top camera's distance to the floor changes by as much. ``camera_back`` : mm the camera (and
+    projector) steps back along its viewing direction, away from the animal (negative: nearer)."""
     if floor not in FLOORS:
         raise ValueError(f"floor must be one of {', '.join(FLOORS)}, got {floor!r}")
     centre, target, up = (np.asarray(v, float) for v in VIEW_CAMERAS[view])
     up_by = np.array([0.0, camera_height, 0.0])
+    if camera_back:
+        centre = centre + camera_back * (centre - target) / np.linalg.norm(centre - target)
     R, t = look_at(centre + up_by, target if view == "top" or camera_aimed else target + up_by, up)
     to_world = lambda p: (p - t) @ R  # noqa: E731  camera -> world
 
@@ -148,7 +152,7 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
     light   : overrides of Lighting fields for every exposure (e.g. {"read_noise": 4.0, "gain": 0.8}),
               plus "stripe_ambient" to set the room light of the calibration stripe images.
     scene   : options of the animal views' scene (``animal_scene``: "wall", "floor_albedo", "floor", "box",
-              "coat", "platform", "rails", "camera_height", "camera_aimed").
+              "coat", "platform", "rails", "camera_height", "camera_aimed", "camera_back").
     """
     light = dict(light or {})
     stripe_ambient = light.pop("stripe_ambient", None)
