@@ -22,12 +22,13 @@ ANIMAL = 5
 VIEWS = ("side", "top")
 
 
-def cached_capture(out: Path, post=None, **render) -> Path:
-    """A side and a top view (no calibration poses) rendered into ``out`` by ``write_capture(**render)``
-    unless the cache already holds them; ``post(out)`` runs once after a fresh render."""
+def cached_capture(out: Path, post=None, views: tuple[str, ...] = VIEWS, **render) -> Path:
+    """The ``views`` (a side and a top view by default; no calibration poses) rendered into ``out`` by
+    ``write_capture(**render)`` unless the cache already holds them; ``post(out)`` runs once after a fresh
+    render."""
     if not (out / "truth" / "truth.json").exists():
         t0 = time.perf_counter()
-        write_capture(out, scenes=VIEWS, poses=0, **render)
+        write_capture(out, scenes=views, poses=0, **render)
         if post is not None:
             post(out)
         print(f"  rendered {out.name} in {time.perf_counter() - t0:.0f} s", flush=True)
@@ -83,10 +84,10 @@ def pieces_text(pieces: list[tuple[int, int | None, int]], shift: int = 0) -> st
     return f"{text}; then all {shift:+d}" if shift else text
 
 
-def print_pieces(name: str, cap: Path) -> list[float]:
-    """Label both views of ``cap``, print a row each (labelled, right, pieces) and return the shares right."""
+def print_pieces(name: str, cap: Path, views: tuple[str, ...] = VIEWS) -> list[float]:
+    """Label the ``views`` of ``cap``, print a row each (labelled, right, pieces) and return the shares right."""
     rights = []
-    for view in VIEWS:
+    for view in views:
         v = label_view(cap, view)
         rights.append(v.right)
         print(f"{name:25s} {view:4s}  {v.labelled:8.1%}  {v.right:7.2%}   {pieces_text(v.pieces, v.shift)}", flush=True)

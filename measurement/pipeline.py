@@ -183,6 +183,11 @@ FAINT_ANIMAL = 25.0  # gray levels: the animal's stripes' median contrast under 
 def _warnings(meas: dict, labels: Labels) -> list[str]:
     """What a technician should know before trusting the numbers."""
     out = []
+    if meas.get("view") in ("front", "back"):
+        out.append(f"{meas['view']} views are not yet reliable: seen end-on, the head, chest and legs stand at "
+                   "different depths and their stripe indices are often wrong (on the simulator's front and back "
+                   "views from a fifth to nearly all of the animal's stripes), so the measurements below may be far "
+                   "off: measure from the side or from above")
     contrast = meas.get("animal_contrast")
     if contrast is not None and contrast < FAINT_ANIMAL:
         out.append(f"the stripes on the animal are faint (median {contrast:.0f} gray levels above their "
