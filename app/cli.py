@@ -54,7 +54,9 @@ def cmd_calibrate(args: argparse.Namespace) -> None:
     print(f"calibration written to {out} (report {report})")
     print(f"reprojection error E1 = {result.reprojection_error_px:.4f} px over {len(result.poses) - len(skipped)} poses")
     if result.planes is not None:
-        print(f"{len(result.planes)} light planes, plane error E2 = {result.plane_error:.4g}")
+        across = " (the stripes run across the image: planes numbered top to bottom)" \
+            if result.stripe_axis == "horizontal" else ""
+        print(f"{len(result.planes)} light planes, plane error E2 = {result.plane_error:.4g}{across}")
     for p in skipped:
         print(f"skipped {p.name}: {p.reason}")
 
