@@ -89,3 +89,16 @@ def test_stripes_running_the_other_way_than_the_calibration_are_named(turned):
     data["stripe_axis"] = "diagonal"
     with pytest.raises(CalibrationError, match="stripe_axis"):
         load_calibration(data)
+
+
+def test_the_picture_edges_are_named_as_the_turned_camera_has_them(tmp_path):
+    """The side camera 200 mm higher cuts the feet at the bottom of the picture; transposed, the feet reach
+    the turned camera's right edge, and that is the edge the warning names."""
+    from measurement.simulate.capture import write_capture
+
+    cap = write_capture(tmp_path / "high", size=(1024, 683), poses=0, seed=5, scenes=("side",),
+                        scene={"camera_height": 200.0})
+    turned = transpose_capture(cap, tmp_path / "turned")
+    r = scan(read_image(turned / "scan" / "side.png"), load_calibration(turned / "truth" / "truth.json"), "side")
+    assert r.measurements["frame_edges"] == ["right"]
+    assert any("reaches the right edge of the picture" in w for w in r.measurements["warnings"])
