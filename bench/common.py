@@ -3,6 +3,7 @@ against the simulator's exact crossings."""
 
 from __future__ import annotations
 
+import argparse
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +21,17 @@ from measurement.triangulation import ray_table, rays_at
 
 ANIMAL = 5
 VIEWS = ("side", "top")
+
+
+def size_and_cache(doc: str | None, size: str = "1536x1024") -> tuple[tuple[int, int], Path]:
+    """A bench's command line, --size WxH (default ``size``) and --cache DIR: the image size and the render
+    cache."""
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--size", default=size)
+    ap.add_argument("--cache", default="/tmp/bodyscan-bench")
+    args = ap.parse_args()
+    w, h = (int(v) for v in args.size.split("x"))
+    return (w, h), Path(args.cache)
 
 
 def cached_capture(out: Path, post=None, views: tuple[str, ...] = VIEWS, **render) -> Path:

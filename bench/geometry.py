@@ -14,13 +14,12 @@ share of those right, and per piece of the animal the offset chosen against the 
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.common import cached_capture, print_pieces, summary  # noqa: E402
+from bench.common import cached_capture, print_pieces, size_and_cache, summary  # noqa: E402
 from measurement.simulate.rig import default_rig  # noqa: E402
 
 GEOMETRIES = {"left": -250.0, "narrow": 150.0, "wide": 400.0}  # projector baseline, mm (negative: left)
@@ -34,11 +33,7 @@ RENDERS = ((40, True, 21), (50, False, 22))
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--size", default="1536x1024")
-    ap.add_argument("--cache", default="/tmp/bodyscan-bench")
-    args = ap.parse_args()
-    size = tuple(int(v) for v in args.size.split("x"))
+    size, cache = size_and_cache(__doc__)
     rights: list[float] = []
     print("rig                       view  labelled  right    pieces (centres: chosen offset / true)")
     variants = ([(name, {"rig": default_rig(size, stripes, baseline_mm=baseline)}, stripes)
@@ -52,7 +47,7 @@ def main() -> None:
     for name, how, stripes in variants:
         fur, seed = renders[stripes]
         label = f"{name}-{stripes}-{'fur' if fur else 'clean'}-{seed}"
-        cap = cached_capture(Path(args.cache) / f"geometry-{size[0]}x{size[1]}-{label}", stripes=stripes,
+        cap = cached_capture(cache / f"geometry-{size[0]}x{size[1]}-{label}", stripes=stripes,
                              size=size, seed=seed, fur=fur, **how)
         rights += print_pieces(label, cap)
     print(summary(rights))

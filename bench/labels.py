@@ -9,7 +9,6 @@ label correctness, and the time of the labelling step.
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -17,21 +16,17 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.common import VIEWS, cached_capture, label_view  # noqa: E402
+from bench.common import VIEWS, cached_capture, label_view, size_and_cache  # noqa: E402
 
 RENDERS = ((40, True, 11), (40, False, 12), (50, True, 13), (40, True, 14))
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--size", default="1536x1024")
-    ap.add_argument("--cache", default="/tmp/bodyscan-bench")
-    args = ap.parse_args()
-    size = tuple(int(v) for v in args.size.split("x"))
+    size, cache = size_and_cache(__doc__)
     rights = []
     print("render              view  animal labelled  right    background right  labelling ms")
     for stripes, fur, seed in RENDERS:
-        cap = cached_capture(Path(args.cache) / f"labels-{size[0]}x{size[1]}-{stripes}-{'fur' if fur else 'clean'}-{seed}",
+        cap = cached_capture(cache / f"labels-{size[0]}x{size[1]}-{stripes}-{'fur' if fur else 'clean'}-{seed}",
                              stripes=stripes, size=size, seed=seed, fur=fur)
         for view in VIEWS:
             v = label_view(cap, view)

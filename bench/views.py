@@ -9,29 +9,24 @@ the animal the offset chosen against the true one. Four renders: 40 and 50 strip
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from bench.common import cached_capture, print_pieces, summary  # noqa: E402
+from bench.common import cached_capture, print_pieces, size_and_cache, summary  # noqa: E402
 
 RENDERS = ((40, True, 21), (50, False, 22), (40, False, 23), (50, True, 24))
 VIEWS = ("front", "back")
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--size", default="3072x2048")
-    ap.add_argument("--cache", default="/tmp/bodyscan-bench")
-    args = ap.parse_args()
-    size = tuple(int(v) for v in args.size.split("x"))
+    size, cache = size_and_cache(__doc__, "3072x2048")
     rights: list[float] = []
     print("render                    view   labelled  right    pieces (centres: chosen offset / true)")
     for stripes, fur, seed in RENDERS:
         label = f"{stripes}-{'fur' if fur else 'clean'}-{seed}"
-        cap = cached_capture(Path(args.cache) / f"views-{size[0]}x{size[1]}-{label}", views=VIEWS, stripes=stripes,
+        cap = cached_capture(cache / f"views-{size[0]}x{size[1]}-{label}", views=VIEWS, stripes=stripes,
                              size=size, seed=seed, fur=fur)
         rights += print_pieces(label, cap, VIEWS)
     print(summary(rights))
