@@ -69,7 +69,7 @@ def label_view(cap: Path, view: str) -> ViewLabels:
     rays = rays_at(c.u, c.v, ray_table(cal.intrinsics))
     matching._TRACE = []
     t0 = time.perf_counter()
-    lab = label_centres(c, rays, cal.planes, img.shape).stripe
+    lab = label_centres(c, rays, cal.planes, img.shape, view=view).stripe
     ms = 1000 * (time.perf_counter() - t0)
     trace, matching._TRACE = matching._TRACE, None
     truth, kind = match_crossings(np.column_stack([c.u, c.v]), dict(np.load(cap / "truth" / f"{view}_stripes.npz")))

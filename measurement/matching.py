@@ -209,12 +209,14 @@ class Labels:
 
 
 def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], planes: np.ndarray,
-                  shape: tuple[int, int], params: MatchingParams = MatchingParams()) -> Labels:
+                  shape: tuple[int, int], params: MatchingParams = MatchingParams(), view: str = "side") -> Labels:
     """Stripe index (M,) for each centre, -1 where none can be trusted.
 
     rays : (M, 3) viewing rays of the centres (z = 1), or a function that gives them (called while the
            second core links the centres into segments, which needs no rays)
     planes : (N, 4) light planes, left to right
+    view : "side", "top", "front" or "back"; from above a V-shaped conflict curve of the first piece (and of
+           the whole-animal recheck) is read at its bottom (``offsets.choose_offset``)
     """
     n = len(planes)
     m = len(c)
@@ -261,9 +263,10 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     table = BinTable(rays, planes)  # the pieces' elevation bins, shared by every conflict curve below
     bg_lit = lit_cells(rays, planes, bg_cl, np.flatnonzero(bg_cl >= 0))
     footprint = Footprints(rays, planes, complete, bg_planes, bg_cl) if bg_planes is not None else None
+    from_above = view == "top"
     fg_labels, small, cl, lit, first, shallow = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol,
                                                    n, weighed, params.depth_range_mm, bg_planes, bg_lit,
-                                                   pairs, table, footprint)
+                                                   pairs, table, footprint, from_above)
     if fg_labels:
         # pieces of the animal without shadow evidence of their own continue a labelled piece's surface
         is_bg = np.zeros(seg.max() + 1, bool)
@@ -286,7 +289,8 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     if fg_labels and first is not None and not shallow:
         fg = {s: k for s, k in seg_label.items() if s not in bg_labels}
         shift = _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg, fg_mask, fg_pairs, long_seg, left,
-                                    right, tol, n, bg_planes, first, table, footprint=footprint)
+                                    right, tol, n, bg_planes, first, table, footprint=footprint,
+                                    from_above=from_above)
         if shift:
             seg_label = {**bg_labels, **{s: k + shift for s, k in fg.items() if 0 <= k + shift < n}}
             if _TRACE is not None:  # (no centres, no relative labels, the shift of every animal label)
@@ -300,8 +304,8 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
 
 
 def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, weighed, zrange,
-                bg_planes, bg_lit, pairs: _Pairs, table: BinTable, footprint: Footprints | None = None
-                ) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None, bool]:
+                bg_planes, bg_lit, pairs: _Pairs, table: BinTable, footprint: Footprints | None = None,
+                from_above: bool = False) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None, bool]:
     """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
     (M,) the centres of every piece that was weighed for an offset. ``bg_lit`` : the projector cells lit
     at the labels of ``seg_label`` (``lit_cells``); ``pairs`` : the ``_neighbour_pairs`` of ``long_seg``;
@@ -335,7 +339,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         reading: dict = {}
         off = occlusion_offset(rays, planes, cl, rel[seg], idx, n, projector_right(planes), background=bg_planes,
                                beside_placed=len(idx) < placed_max, lit=lit, table=table, shallow=True,
-                               report=reading, footprint=footprint)
+                               report=reading, footprint=footprint, from_above=from_above)
         if _TRACE is not None:
             _TRACE.append((idx, rel[seg[idx]], off))
         if off is None:
@@ -387,7 +391,7 @@ def _pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pair
 
 def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask, fg_pairs, long_seg, left, right, tol, n,
                         bg_planes, first, table: BinTable, max_behind: float = 0.001, evidence_share: float = 0.6,
-                        footprint: Footprints | None = None) -> int:
+                        footprint: Footprints | None = None, from_above: bool = False) -> int:
     """Stripes (0 or a shift away from the conflicts) by which to move every animal label in ``fg_labels``
     (segment -> label), from the conflict curve of all of them together against the background's labels
     ``bg_cl`` (M,) and the cells they light ``bg_lit``; ``fg_pairs`` : the ``_neighbour_pairs`` of ``fg_mask``;
@@ -411,7 +415,7 @@ def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask,
         return 0
     r = np.maximum(r, 0)  # occlusion_offset and behind_background read only the animal's centres
     right_side = projector_right(planes)
-    shift = occlusion_offset(rays, planes, bg_cl, r, idx, n, right_side, lit=bg_lit, table=table)
+    shift = occlusion_offset(rays, planes, bg_cl, r, idx, n, right_side, lit=bg_lit, table=table, from_above=from_above)
     if not shift or (shift > 0) != right_side:
         return 0
     if bg_planes is not None and behind_background(rays, planes, r, first, n, bg_planes, shift,

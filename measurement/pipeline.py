@@ -112,7 +112,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
         looked_up.extend(rays_and_cells(centres.u, centres.v, table))
         return looked_up[0]
 
-    labels = label_centres(centres, rays, calibration.planes, image.shape[:2], params.matching)
+    labels = label_centres(centres, rays, calibration.planes, image.shape[:2], params.matching, view)
     cells = looked_up[1] if looked_up else rays_and_cells(centres.u, centres.v, table)[1]
     t["match"] = time.perf_counter()
     seg_ids = labels.segment if labels.segment is not None else np.arange(len(centres))

@@ -253,3 +253,21 @@ def test_elevation_bins_and_conflict_cells_shared_by_both_cores_are_those_of_one
     one = _kernels.distinct_cells(rel[sub], bins, sub, offs, 40, deep, 20_000_000)
     assert len(rel[sub]) * len(offs) >= offsets._SPLIT_CELLS and both[2] and one[2]
     assert np.array_equal(both[0], one[0]) and np.array_equal(both[1], one[1]) and one[1].any()
+
+
+def test_from_above_a_v_shaped_curve_is_read_at_its_bottom():
+    """A top view's first piece (the shared cow's at 3072 px): a steady ramp of about 0.04 a stripe whose
+    last step onto the true offset 10 is a third of that (the edge column's floor partly hidden), then
+    the pattern's edge. Read up the ramp, the weak step is tolerated and the piece lands one stripe low;
+    from above the curve's V is read at its bottom. Seen from the side the reading stays the ramp's."""
+    from measurement.offsets import choose_offset
+
+    conflicts = {o: 0.04 * (10 - o) for o in range(0, 9)}
+    conflicts.update({9: 0.012, 10: 0.0, 11: 0.0, 12: 0.0})
+    beyond = {o: (0.0, {11: 0.05, 12: 0.1}.get(o, 0.0)) for o in conflicts}
+    assert choose_offset(conflicts, beyond) == 9
+    assert choose_offset(conflicts, beyond, from_above=True) == 10
+    # a curve with no second wall is read as before (here: refused, the piece could sit anywhere past 9)
+    flat = {**conflicts, 11: 0.0, 12: 0.0, 13: 0.0}
+    open_beyond = {o: (0.0, 0.0) for o in flat}
+    assert choose_offset(flat, open_beyond, from_above=True) is None and choose_offset(flat, open_beyond) is None
