@@ -364,3 +364,19 @@ def test_a_top_view_whose_shadow_ramp_ends_in_a_weak_step_is_placed_at_the_botto
         animal = kind == 5
         right[view] = float(np.mean(r.scene_stripe[animal] == tk[animal]))
     assert right["top"] > 0.95 > 0.05 > right["side"]
+
+
+def test_a_body_and_a_thigh_read_apart_are_read_as_one_where_they_touch(tmp_path):
+    """The 50-stripe fur side view, seed 12, at 1536 px: the depth step between the hind thigh and the body
+    splits the animal into two large pieces, and reading each on its own put the body one stripe low (18 %
+    of the animal's centres right). One stripe up it touches the thigh in 3-D; read as one piece at that
+    relative offset, both are placed right."""
+    from measurement.simulate.capture import write_capture
+    from measurement.simulate.truth import match_crossings
+
+    cap = write_capture(tmp_path / "fur12", stripes=50, size=(1536, 1024), seed=12, fur=True, scenes=("side",),
+                        poses=0)
+    r = scan(read_image(cap / "scan" / "side.png"), load_calibration(cap / "truth" / "truth.json"), "side")
+    tk, kind = match_crossings(r.scene_uv.astype(float), dict(np.load(cap / "truth" / "side_stripes.npz")))
+    animal = kind == 5
+    assert np.mean(r.scene_stripe[animal] == tk[animal]) > 0.95
