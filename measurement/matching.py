@@ -370,6 +370,11 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
 CONTACT_MM = (12.0, 20.0)  # a piece touches another under the first, is apart from it over the second
 
 
+def _gap(tree, points: np.ndarray) -> float:
+    """The 0.5th percentile of the distances (mm) from ``points`` (K, 3) to the nearest point in ``tree``."""
+    return float(np.percentile(tree.query(points)[0], 0.5))
+
+
 def _read_touching(rays, planes, seg, cl, bg_lit, placed: list[list], n, table, bg_planes, footprint, from_above
                    ) -> bool:
     """The first piece placed and a second large one (at least ``SMALL_PIECE`` of it) that lie apart in 3-D
@@ -387,18 +392,20 @@ def _read_touching(rays, planes, seg, cl, bg_lit, placed: list[list], n, table, 
     a_idx, _, a_rel, a_off = placed[0]
     ra = a_rel[seg[a_idx]]
 
-    def points(idx, r, off):
-        return intersect(rays.take(idx, axis=0), planes.take(np.clip(r + off, 0, n - 1), axis=0))
+    def points(idx, r, off, most):  # every j-th centre: a few thousand keep the gap to a millimetre
+        step = max(1, len(idx) // most)
+        return intersect(rays.take(idx[::step], axis=0), planes.take(np.clip(r[::step] + off, 0, n - 1), axis=0))
 
     for b in placed[1:]:
         b_idx, _, b_rel, b_off = b
         if len(b_idx) < SMALL_PIECE * len(a_idx):
             continue
         rb = b_rel[seg[b_idx]]
-        tree = cKDTree(points(b_idx, rb, b_off))
-        gap = {d: float(np.percentile(tree.query(points(a_idx, ra, a_off + d))[0], 0.5)) for d in (-1, 0, 1)}
-        near = [d for d in (-1, 1) if gap[d] < CONTACT_MM[0]]
-        if gap[0] <= CONTACT_MM[1] or len(near) != 1:
+        tree = cKDTree(points(b_idx, rb, b_off, 4000))
+        if _gap(tree, points(a_idx, ra, a_off, 1500)) <= CONTACT_MM[1]:
+            continue
+        near = [d for d in (-1, 1) if _gap(tree, points(a_idx, ra, a_off + d, 1500)) < CONTACT_MM[0]]
+        if len(near) != 1:
             continue
         d = near[0]
         idx = np.concatenate([a_idx, b_idx])
