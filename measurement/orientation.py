@@ -14,34 +14,24 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from .images import to_gray
+
 AXES = ("vertical", "horizontal")
 
 
-def stripe_axis(stripes: np.ndarray, background: np.ndarray | None = None, region: np.ndarray | None = None
-                ) -> str:
+def stripe_axis(stripes: np.ndarray, background: np.ndarray | None = None) -> str:
     """``"vertical"`` when the stripes of ``stripes`` (H, W) or (H, W, C) run closer to the image's columns,
     ``"horizontal"`` when closer to its rows: from the energy of the brightness changes across and along
     the rows of the stripe light, at a quarter of the resolution. ``background`` : the same view without
     the stripes (the board image of a calibration pose), subtracted first so that the chessboard's own
-    edges do not count; ``region`` (H, W) bool: where to look (default: everywhere)."""
-    img = _gray32(stripes)
+    edges do not count."""
+    img = to_gray(stripes).astype(np.float32)
     if background is not None and background.shape[:2] == img.shape:
-        img = img - _gray32(background)
+        img -= to_gray(background).astype(np.float32)
     small = cv2.resize(img, (max(1, img.shape[1] // 4), max(1, img.shape[0] // 4)), interpolation=cv2.INTER_AREA)
     across = cv2.Sobel(small, cv2.CV_32F, 1, 0, ksize=3)  # changes along a row: stripes that run down
     along = cv2.Sobel(small, cv2.CV_32F, 0, 1, ksize=3)
-    if region is not None and region.shape == img.shape:
-        keep = cv2.resize(region.astype(np.uint8), (small.shape[1], small.shape[0]),
-                          interpolation=cv2.INTER_NEAREST).astype(bool)
-        across, along = across[keep], along[keep]
     return "vertical" if float(np.sum(across * across)) >= float(np.sum(along * along)) else "horizontal"
-
-
-def _gray32(img: np.ndarray) -> np.ndarray:
-    a = np.asarray(img)
-    if a.ndim == 3:
-        a = a[..., :3].mean(axis=2) if a.shape[2] >= 3 else a[..., 0]
-    return a.astype(np.float32)
 
 
 def transpose_image(img: np.ndarray) -> np.ndarray:

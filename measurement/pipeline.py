@@ -153,7 +153,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     on_animal = idx[animal]
     meas["animal_contrast"] = (round(float(np.median(centres.contrast.take(on_animal))), 1)
                                if len(on_animal) >= 200 else None)
-    meas["frame_edges"] = (frame_edges(uv[animal][:, ::-1], image.shape[1::-1][-2:]) if calibration.transposed
+    meas["frame_edges"] = (frame_edges(uv[animal][:, ::-1], (image.shape[1], image.shape[0])) if calibration.transposed
                            else frame_edges(uv[animal], image.shape[:2]))
     meas["warnings"] = _warnings(meas, labels)
     return ScanResult(animal_pts, animal_stripe, uv[animal], pts, stripe, uv, meas, timings)

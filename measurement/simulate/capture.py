@@ -19,6 +19,7 @@ import numpy as np
 import trimesh
 
 from ..camera import ray_grid
+from ..orientation import swap_xy, transpose_image
 from .animal import Animal, from_mesh, quadruped
 from .boards import Board, board_surface, sample_poses
 from .render import Lighting, expose, stripe_irradiance, stripe_truth
@@ -266,7 +267,7 @@ def transpose_capture(src: str | Path, dst: str | Path) -> Path:
             img = cv2.imread(str(f), cv2.IMREAD_UNCHANGED)
             if img is None:
                 continue
-            cv2.imwrite(str(dst / sub / f.name), np.ascontiguousarray(np.swapaxes(img, 0, 1)))
+            cv2.imwrite(str(dst / sub / f.name), transpose_image(img))
     (dst / "rig.json").write_text((src / "rig.json").read_text())
     if (src / "truth").exists():
         (dst / "truth").mkdir(exist_ok=True)
@@ -277,14 +278,14 @@ def transpose_capture(src: str | Path, dst: str | Path) -> Path:
         dist[2], dist[3] = dist[3], dist[2]  # p1 and p2 trade places (5-coefficient model)
         truth["dist_coeffs"] = dist
         truth["image_size"] = list(truth["image_size"])[::-1]
-        truth["planes"] = np.array(truth["planes"])[:, [1, 0, 2, 3]].tolist()
+        truth["planes"] = swap_xy(np.array(truth["planes"])).tolist()
         truth["stripe_axis"] = "horizontal"
         (dst / "truth" / "truth.json").write_text(json.dumps(truth))
         for f in (src / "truth").glob("*_stripes.npz"):
             t = dict(np.load(f))
-            t["points"], t["uv"] = t["points"][:, [1, 0, 2]], t["uv"][:, ::-1]
+            t["points"], t["uv"] = swap_xy(t["points"]), t["uv"][:, ::-1]
             np.savez_compressed(dst / "truth" / f.name, **t)
         for f in (src / "truth").glob("*_animal.ply"):
             mesh: trimesh.Trimesh = trimesh.load(f, force="mesh", process=False)  # type: ignore[assignment]
-            trimesh.Trimesh(mesh.vertices[:, [1, 0, 2]], mesh.faces[:, ::-1], process=False).export(dst / "truth" / f.name)
+            trimesh.Trimesh(swap_xy(mesh.vertices), mesh.faces[:, ::-1], process=False).export(dst / "truth" / f.name)
     return dst
