@@ -352,6 +352,28 @@ def test_a_floor_claim_must_be_as_flat_as_the_labelled_floor():
                             flatness=np.inf) == {3: 20, 4: 25}
 
 
+def test_a_short_floor_piece_is_claimed_and_a_short_animal_piece_is_not():
+    """A floor stripe's first rows at the foot of the wall are split off by the kink there: 6-14 rows.
+    Unclaimed, they joined the animal's pieces and put floor points 8-25 mm off its surface into its cloud."""
+    from measurement.background import claim_background
+
+    n = 40
+    planes = np.column_stack([np.ones(n), np.zeros(n), np.zeros(n), 10.0 * np.arange(n)])  # x = 10 k mm
+    floor = np.array([[0.0, 1.0, 0.0, 500.0]])  # y = 500 mm
+    rng = np.random.default_rng(1)
+
+    def segment(k, z, y):
+        p = np.column_stack([np.full(len(z), 10.0 * k), y, z])
+        return p / p[:, 2:]
+
+    long_z, short_z = np.linspace(1100, 1300, 40), np.linspace(1290, 1300, 8)
+    rays = np.vstack([segment(k, long_z, 500 + rng.normal(0, 0.1, 40)) for k in (5, 6, 7)]
+                     + [segment(20, short_z, 500 + rng.normal(0, 0.1, 8)),  # 8 rows of floor
+                        segment(25, short_z, 500 - 5 * np.linspace(0, 1, 8) ** 2)])  # 8 rows of a curved leg
+    seg = np.repeat(np.arange(5), [40, 40, 40, 8, 8])
+    assert claim_background(None, rays, planes, seg, {0: 5, 1: 6, 2: 7}, np.ones(len(seg), bool), floor, n) == {3: 20}
+
+
 def test_group_medians_equal_numpy_median_per_run():
     from measurement.background import _group_medians
 
