@@ -462,17 +462,19 @@ def _pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pair
         left_idx = left_idx[~in_cluster]
         sizes -= np.bincount(seg[idx], minlength=len(sizes))
         if link_px is not None and len(segs) > 1 and len(idx) >= 50:  # smaller pieces are never weighed
-            labs = _along_stripe(c, rays, planes, seg, idx, segs, labs, pairs, n, link_px, ALONG_TOL * tol)
+            labs = _along_stripe(c, rays, planes, seg, idx, segs, labs, pairs, by_own, n, link_px, ALONG_TOL * tol)
         found.append((idx, dict(zip(segs.tolist(), labs.tolist(), strict=True))))
     return found
 
 
 ALONG_TOL = 0.25 / 1.3  # of the growth tolerance: a quarter of a stripe spacing, as ``_continue_along``'s
 ALONG_SPACING = 1.3  # a row neighbour "clean" within this ratio of its own neighbour's spacing
+ALONG_CLEAN = 10  # a clean row pair weighs this many others in the cut
+ALONG_CUT = 0.2  # a cut that settles a disagreement carries under this share of the pairs inside its side
 
 
-def _along_stripe(c, rays, planes, seg, idx, segs, labs, pairs: _Pairs, n, link_px, tol_mm, min_rows: int = 10
-                  ) -> np.ndarray:
+def _along_stripe(c, rays, planes, seg, idx, segs, labs, pairs: _Pairs, by_own, n, link_px, tol_mm,
+                  min_rows: int = 10) -> np.ndarray:
     """A piece's relative labels ``labs`` (G,) of its segments ``segs`` (G,) (centres ``idx`` (K,)), made to
     agree along the stripes: where a segment starts one to four rows below where another of the piece ends,
     within ``link_px`` columns (times the rows of the gap beyond the first) and, on the first one's light
@@ -481,32 +483,50 @@ def _along_stripe(c, rays, planes, seg, idx, segs, labs, pairs: _Pairs, n, link_
     to the next, can alias at a depth step: a leg in front of the chest took the chest's stripe two to its
     right for its neighbour and came out one stripe off the neck it continues.
 
-    Such a disagreement is settled when the piece falls apart without the row neighbours that may be a step:
-    kept are only those whose labels are one apart and whose spacing in the image is within
-    ``ALONG_SPACING`` of the spacing beyond the neighbour. If the two segments then lie in different parts,
-    the smaller part (in centres) takes the other's labels; otherwise nothing changes. Segments under
-    ``min_rows`` centres make no link. On the 326-view dump (2026-11-22): views with 95 % of the animal's
-    centres right 245 -> 248 (a rig raised 200 mm seen from the side, refused before; wide stripes seen from
-    above, 9 -> 99.5 %; a black coat's side view at the threshold), a 1536 px fur side view 97 -> 99.2 %,
-    wrong centres -4100; on the five-seed bench one view 99.99 -> 100 %, the others as they were; 0.5-1 ms a
-    scan."""
+    Such a disagreement is settled where the piece falls apart at a depth step. First without the row
+    neighbours that may be one: kept are only those whose labels are one apart and whose spacing in the
+    image is within ``ALONG_SPACING`` of the spacing beyond the neighbour; if the two segments then lie in
+    different parts, the smaller part (in centres) takes the other's labels. Otherwise, at the least cut
+    between them through the row neighbours (a clean pair weighs ``ALONG_CLEAN`` times another): when that
+    cut carries under ``ALONG_CUT`` of the row pairs inside the smaller side, that side takes the other's
+    labels (a leg held to the chest by a few aliased rows); a cut around one segment or a thin strip is
+    no cut. Segments under ``min_rows`` centres make no link.
+
+    On the 326-view dump (2026-11-22), the parts: views with 95 % of the animal's centres right 245 -> 248
+    (a rig raised 200 mm seen from the side, refused before; wide stripes seen from above, 9 -> 99.5 %; a
+    black coat's side view at the threshold), a 1536 px fur side view 97 -> 99.2 %, wrong centres -4100;
+    the cut: 248 -> 250 (the seed-8 50-stripe fur side view of the five-seed bench 12 -> 98.5 %, the
+    bunny's 3072 px fur side view 43 -> 98 %), wrong centres -28 000, none of the views at 95 % lower, but
+    four views already wrong from above lost more (the 1536 px spot cow 76 -> 29 %)."""
     from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    from scipy.sparse.csgraph import breadth_first_order, connected_components, maximum_flow
 
     g = len(segs)
     pos = np.full(seg.max() + 1, -1, np.int64)
     pos[segs] = np.arange(g)
     own = pos[seg.take(idx)]
     size = np.bincount(own, minlength=g)
-    order = idx[np.lexsort((c.v.take(idx), own))]
-    starts = np.r_[0, np.cumsum(size)[:-1]]
-    first, last = order[starts], order[starts + size - 1]
+    rows = c.v.take(idx)
+    if (np.diff(rows) >= 0).all():  # centres in raster order (as detection gives them): no sort needed
+        first, last = np.empty(g, np.int64), np.empty(g, np.int64)
+        first[own[::-1]], last[own] = idx[::-1], idx
+    else:
+        order = idx[np.lexsort((rows, own))]
+        starts = np.r_[0, np.cumsum(size)[:-1]]
+        first, last = order[starts], order[starts + size - 1]
     ok = size >= min_rows
     # candidate links a -> b: b's first row 1-4 below a's last, close in column, labels differing
-    gap = c.v.take(first)[None, :].astype(np.int64) - c.v.take(last)[:, None]
-    du = np.abs(c.u.take(first)[None, :] - c.u.take(last)[:, None])
-    a, b = np.nonzero((gap >= 1) & (gap <= 4) & (du <= link_px * np.maximum(1, gap - 1)) & ok[:, None] & ok[None, :]
-                      & (labs[:, None] != labs[None, :]))
+    v_first, v_last = c.v.take(first).astype(np.int64), c.v.take(last).astype(np.int64)
+    by_first = np.argsort(v_first, kind="stable")
+    lo = np.searchsorted(v_first[by_first], v_last + 1)
+    hi = np.searchsorted(v_first[by_first], v_last + 4, side="right")
+    count = hi - lo
+    a = np.repeat(np.arange(g), count)
+    b = by_first[np.arange(count.sum()) - np.repeat(np.cumsum(count) - count - lo, count)]
+    gap = v_first[b] - v_last[a]
+    near = np.abs(c.u.take(first[b]) - c.u.take(last[a])) <= link_px * np.maximum(1, gap - 1)
+    keep = near & ok[a] & ok[b] & (labs[a] != labs[b])
+    a, b = a[keep], b[keep]
     if len(a) == 0:
         return labs
     k = planes.take(np.clip(labs[a], 0, n - 1), axis=0)
@@ -514,25 +534,55 @@ def _along_stripe(c, rays, planes, seg, idx, segs, labs, pairs: _Pairs, n, link_
     a, b = a[step < tol_mm], b[step < tol_mm]
     if len(a) == 0:
         return labs
-    # the clean row-neighbour edges between the piece's segments
-    i, f, far = pairs.cols[0], pairs.cols[1], pairs.cols[5]
-    po, pn = pos[pairs.cols[3]], pos[pairs.cols[4]]
-    both = (po >= 0) & (pn >= 0)
-    i, f, far, po, pn = i[both], f[both], far[both], po[both], pn[both]
+    # the row-neighbour pairs between the piece's segments (``by_own`` : the pairs grouped by their own
+    # segment, ``_kernels.pair_groups``), and which of them are clean
+    group_starts, members = by_own
+    count = group_starts[segs + 1] - group_starts[segs]
+    at = members[np.arange(count.sum()) - np.repeat(np.cumsum(count) - count - group_starts[segs], count)]
+    at = at[pos[pairs.cols[4].take(at)] >= 0]
+    i, f, far = pairs.cols[0].take(at), pairs.cols[1].take(at), pairs.cols[5].take(at)
+    po, pn = pos[pairs.cols[3].take(at)], pos[pairs.cols[4].take(at)]
     s1 = np.abs(c.u.take(i) - c.u.take(f))
     s2 = np.where(far >= 0, np.abs(c.u.take(f) - c.u.take(np.maximum(far, 0))), s1)
-    clean = ((np.abs(labs[po] - labs[pn]) == 1) & (s1 < ALONG_SPACING * s2) & (s2 < ALONG_SPACING * s1))
-    graph = coo_matrix((np.ones(int(clean.sum())), (po[clean], pn[clean])), shape=(g, g))
+    clean = (np.abs(labs[po] - labs[pn]) == 1) & (s1 < ALONG_SPACING * s2) & (s2 < ALONG_SPACING * s1)
+    # one edge per pair of segments, in both directions: its clean pairs and the others, weighed
+    lo_seg, hi_seg = np.minimum(po, pn), np.maximum(po, pn)
+    key = lo_seg * g + hi_seg
+    if g * g <= 1 << 22:  # counted in place (a few hundred segments), not sorted
+        weight = np.bincount(key, weights=np.where(clean, ALONG_CLEAN, 1), minlength=g * g)
+        edge = np.flatnonzero(weight)
+        e_weight = weight[edge].astype(np.int32)
+        e_clean = np.bincount(key, weights=clean, minlength=g * g)[edge] > 0
+    else:
+        edge, inverse = np.unique(key, return_inverse=True)
+        e_weight = np.bincount(inverse, weights=np.where(clean, ALONG_CLEAN, 1), minlength=len(edge)).astype(np.int32)
+        e_clean = np.bincount(inverse, weights=clean, minlength=len(edge)) > 0
+    e_lo, e_hi = edge // g, edge % g
+    graph = coo_matrix((np.ones(int(e_clean.sum())), (e_lo[e_clean], e_hi[e_clean])), shape=(g, g))
     _, part = connected_components(graph, directed=False)
     part_size = np.bincount(part, weights=size)
+    capacity = coo_matrix((np.r_[e_weight, e_weight], (np.r_[e_lo, e_hi], np.r_[e_hi, e_lo])), shape=(g, g)).tocsr()
     out = labs.copy()
     for x, y in zip(a.tolist(), b.tolist(), strict=True):
-        if part[x] == part[y] or out[x] == out[y]:
+        if out[x] == out[y]:
             continue
-        small, big = (y, x) if part_size[part[y]] <= part_size[part[x]] else (x, y)
-        out[part == part[small]] += out[big] - out[small]
+        if part[x] != part[y]:
+            small, big = (y, x) if part_size[part[y]] <= part_size[part[x]] else (x, y)
+            out[part == part[small]] += out[big] - out[small]
+            continue
+        flow = maximum_flow(capacity, x, y)
+        residual = capacity - flow.flow
+        residual.data = (residual.data > 0).astype(np.int32)
+        residual.eliminate_zeros()
+        side = np.zeros(g, bool)
+        side[breadth_first_order(residual, x, directed=True, return_predecessors=False)] = True
+        smaller = side if size[side].sum() <= size[~side].sum() else ~side
+        inside = e_weight[smaller[e_lo] & smaller[e_hi]].sum()
+        if flow.flow_value >= ALONG_CUT * (inside + 1):
+            continue
+        small, big = (x, y) if smaller[x] else (y, x)
+        out[smaller] += out[big] - out[small]
     return out
-
 
 def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask, fg_pairs, long_seg, left, right, tol, n,
                         bg_planes, first, table: BinTable, max_behind: float = 0.001, evidence_share: float = 0.6,
