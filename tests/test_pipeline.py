@@ -366,20 +366,25 @@ def test_a_top_view_whose_shadow_ramp_ends_in_a_weak_step_is_placed_at_the_botto
     assert right["top"] > 0.95 > 0.05 > right["side"]
 
 
+def _fur_side_view_right(tmp_path, stripes: int, seed: int) -> float:
+    """The share of the animal's centres labelled right in the simulator's 1536 px fur side view."""
+    from measurement.simulate.capture import write_capture
+    from measurement.simulate.truth import match_crossings
+
+    cap = write_capture(tmp_path / f"fur{seed}", stripes=stripes, size=(1536, 1024), seed=seed, fur=True,
+                        scenes=("side",), poses=0)
+    r = scan(read_image(cap / "scan" / "side.png"), load_calibration(cap / "truth" / "truth.json"), "side")
+    tk, kind = match_crossings(r.scene_uv.astype(float), dict(np.load(cap / "truth" / "side_stripes.npz")))
+    animal = kind == 5
+    return float(np.mean(r.scene_stripe[animal] == tk[animal]))
+
+
 def test_a_body_and_a_thigh_read_apart_are_read_as_one_where_they_touch(tmp_path):
     """The 50-stripe fur side view, seed 12, at 1536 px: the depth step between the hind thigh and the body
     splits the animal into two large pieces, and reading each on its own put the body one stripe low (18 %
     of the animal's centres right). One stripe up it touches the thigh in 3-D; read as one piece at that
     relative offset, both are placed right."""
-    from measurement.simulate.capture import write_capture
-    from measurement.simulate.truth import match_crossings
-
-    cap = write_capture(tmp_path / "fur12", stripes=50, size=(1536, 1024), seed=12, fur=True, scenes=("side",),
-                        poses=0)
-    r = scan(read_image(cap / "scan" / "side.png"), load_calibration(cap / "truth" / "truth.json"), "side")
-    tk, kind = match_crossings(r.scene_uv.astype(float), dict(np.load(cap / "truth" / "side_stripes.npz")))
-    animal = kind == 5
-    assert np.mean(r.scene_stripe[animal] == tk[animal]) > 0.95
+    assert _fur_side_view_right(tmp_path, 50, 12) > 0.95
 
 
 def test_a_leg_grown_across_a_depth_step_agrees_with_the_stripe_it_continues(tmp_path):
@@ -387,15 +392,7 @@ def test_a_leg_grown_across_a_depth_step_agrees_with_the_stripe_it_continues(tmp
     front of it aliased at the depth step, and part of the animal came out one stripe off the stripes it
     continues below the neck (96.9 % of the labelled animal centres right). Made to agree along the
     stripes (``matching._along_stripe``), 99.2 % are."""
-    from measurement.simulate.capture import write_capture
-    from measurement.simulate.truth import match_crossings
-
-    cap = write_capture(tmp_path / "fur11", stripes=40, size=(1536, 1024), seed=11, fur=True, scenes=("side",),
-                        poses=0)
-    r = scan(read_image(cap / "scan" / "side.png"), load_calibration(cap / "truth" / "truth.json"), "side")
-    tk, kind = match_crossings(r.scene_uv.astype(float), dict(np.load(cap / "truth" / "side_stripes.npz")))
-    animal = kind == 5
-    assert np.mean(r.scene_stripe[animal] == tk[animal]) > 0.985
+    assert _fur_side_view_right(tmp_path, 40, 11) > 0.985
 
 
 def test_a_leg_held_to_the_chest_by_a_few_aliased_rows_is_cut_off_and_agrees_along_its_stripes(tmp_path):
@@ -404,12 +401,4 @@ def test_a_leg_held_to_the_chest_by_a_few_aliased_rows_is_cut_off_and_agrees_alo
     other aliased row neighbours, and its feet then sank through the floor at the right offset, so the
     whole animal was placed one stripe low (10 % right). Cut off at the least cut between the two and made
     to agree with the neck, the animal is placed right (98.5 %)."""
-    from measurement.simulate.capture import write_capture
-    from measurement.simulate.truth import match_crossings
-
-    cap = write_capture(tmp_path / "fur8", stripes=50, size=(1536, 1024), seed=8, fur=True, scenes=("side",),
-                        poses=0)
-    r = scan(read_image(cap / "scan" / "side.png"), load_calibration(cap / "truth" / "truth.json"), "side")
-    tk, kind = match_crossings(r.scene_uv.astype(float), dict(np.load(cap / "truth" / "side_stripes.npz")))
-    animal = kind == 5
-    assert np.mean(r.scene_stripe[animal] == tk[animal]) > 0.95
+    assert _fur_side_view_right(tmp_path, 50, 8) > 0.95
