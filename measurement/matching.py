@@ -507,13 +507,12 @@ def _along_stripe(c, rays, planes, seg, idx, segs, labs, pairs: _Pairs, by_own, 
     own = pos[seg.take(idx)]
     size = np.bincount(own, minlength=g)
     rows = c.v.take(idx)
-    if (np.diff(rows) >= 0).all():  # centres in raster order (as detection gives them): no sort needed
-        first, last = np.empty(g, np.int64), np.empty(g, np.int64)
-        first[own[::-1]], last[own] = idx[::-1], idx
+    if (np.diff(rows) >= 0).all():  # centres in raster order (as detection gives them): a counting sort
+        order = idx[_kernels.stable_group_order(own, g)]
     else:
         order = idx[np.lexsort((rows, own))]
-        starts = np.r_[0, np.cumsum(size)[:-1]]
-        first, last = order[starts], order[starts + size - 1]
+    starts = np.r_[0, np.cumsum(size)[:-1]]
+    first, last = order[starts], order[starts + size - 1]
     ok = size >= min_rows
     # candidate links a -> b: b's first row 1-4 below a's last, close in column, labels differing
     v_first, v_last = c.v.take(first).astype(np.int64), c.v.take(last).astype(np.int64)
