@@ -56,6 +56,7 @@ from .segments import (
     row_order,
     segment_rows,
     smooth_along_segments,
+    spans,
     split_at_changes,
 )
 from .threads import second_core
@@ -266,7 +267,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     from_above = view == "top"
     fg_labels, small, cl, lit, first, shallow = _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol,
                                                    n, weighed, params.depth_range_mm, bg_planes, bg_lit,
-                                                   pairs, table, footprint, from_above, link)
+                                                   pairs, table, footprint, from_above, (link, 0.25 * spacing_mm))
     if fg_labels:
         # pieces of the animal without shadow evidence of their own continue a labelled piece's surface
         is_bg = np.zeros(seg.max() + 1, bool)
@@ -305,7 +306,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
 
 def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, weighed, zrange,
                 bg_planes, bg_lit, pairs: _Pairs, table: BinTable, footprint: Footprints | None = None,
-                from_above: bool = False, link_px: float | None = None
+                from_above: bool = False, along: tuple[float, float] | None = None
                 ) -> tuple[dict[int, int], list, np.ndarray, np.ndarray, np.ndarray | None, bool]:
     """Labels for the segments the background did not claim, piece by piece; marks in ``weighed``
     (M,) the centres of every piece that was weighed for an offset. ``bg_lit`` : the projector cells lit
@@ -329,7 +330,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     small = []
     first, first_shallow = None, False
     placed: list[list] = []  # [centres, trial, relative labels (S,), offset] of each piece placed
-    found = sorted(_pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pairs, mid, link_px),
+    found = sorted(_pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pairs, mid, along),
                    key=lambda piece: -len(piece[0]))
     for idx, trial in found:
         if len(idx) < max(50, SMALL_PIECE * len(found[0][0])):  # too little shadow evidence of its own
@@ -435,11 +436,12 @@ def _read_touching(rays, planes, seg, cl, bg_lit, placed: list[list], n, table, 
 
 
 def _pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pairs: _Pairs, mid: int,
-            link_px: float | None = None) -> list[tuple[np.ndarray, dict[int, int]]]:
+            along: tuple[float, float] | None = None) -> list[tuple[np.ndarray, dict[int, int]]]:
     """The pieces of the segments ``seg_label`` leaves unlabelled, in the order they were found: each
     grown by depth continuity from a seed (the longest segment left), as its centres (K,) and its
-    segments' labels relative to the seed's ``mid``, then made to agree along the stripes (``_along_stripe``,
-    with ``link_px``). Specks and stubs (under 30 centres) seed none."""
+    segments' labels relative to the seed's ``mid``, then, with ``along`` (link distance in pixels, depth
+    tolerance in mm), made to agree along the stripes (``_along_stripe``). Specks and stubs (under 30
+    centres) seed none."""
     labelled = np.zeros(seg.max() + 1, bool)
     labelled[list(seg_label)] = True
     remaining = long_seg & ~labelled[seg]
@@ -461,13 +463,12 @@ def _pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pair
         idx = left_idx[in_cluster]
         left_idx = left_idx[~in_cluster]
         sizes -= np.bincount(seg[idx], minlength=len(sizes))
-        if link_px is not None and len(segs) > 1 and len(idx) >= 50:  # smaller pieces are never weighed
-            labs = _along_stripe(c, rays, planes, seg, idx, segs, labs, pairs, by_own, n, link_px, ALONG_TOL * tol)
+        if along is not None and len(segs) > 1 and len(idx) >= 50:  # smaller pieces are never weighed
+            labs = _along_stripe(c, rays, planes, seg, idx, segs, labs, pairs, by_own, n, *along)
         found.append((idx, dict(zip(segs.tolist(), labs.tolist(), strict=True))))
     return found
 
 
-ALONG_TOL = 0.25 / 1.3  # of the growth tolerance: a quarter of a stripe spacing, as ``_continue_along``'s
 ALONG_SPACING = 1.3  # a row neighbour "clean" within this ratio of its own neighbour's spacing
 ALONG_CLEAN = 100  # a clean row pair weighs this many others in the cut: cuts go through the others
 ALONG_CUT = 1.0  # a cut that settles a disagreement weighs less than this share of the pairs inside its side
@@ -528,7 +529,7 @@ def _along_stripe(c, rays, planes, seg, idx, segs, labs, pairs: _Pairs, by_own, 
     hi = np.searchsorted(v_first[by_first], v_last + 4, side="right")
     count = hi - lo
     a = np.repeat(np.arange(g), count)
-    b = by_first[np.arange(count.sum()) - np.repeat(np.cumsum(count) - count - lo, count)]
+    b = by_first[spans(lo, count)]
     gap = v_first[b] - v_last[a]
     near = np.abs(c.u.take(first[b]) - c.u.take(last[a])) <= link_px * np.maximum(1, gap - 1)
     keep = near & ok[a] & ok[b] & (labs[a] != labs[b])
@@ -543,8 +544,7 @@ def _along_stripe(c, rays, planes, seg, idx, segs, labs, pairs: _Pairs, by_own, 
     # the row-neighbour pairs between the piece's segments (``by_own`` : the pairs grouped by their own
     # segment, ``_kernels.pair_groups``), and which of them are clean
     group_starts, members = by_own
-    count = group_starts[segs + 1] - group_starts[segs]
-    at = members[np.arange(count.sum()) - np.repeat(np.cumsum(count) - count - group_starts[segs], count)]
+    at = members[spans(group_starts[segs], group_starts[segs + 1] - group_starts[segs])]
     at = at[pos[pairs.cols[4].take(at)] >= 0]
     i, f, far = pairs.cols[0].take(at), pairs.cols[1].take(at), pairs.cols[5].take(at)
     po, pn = pos[pairs.cols[3].take(at)], pos[pairs.cols[4].take(at)]
@@ -555,14 +555,12 @@ def _along_stripe(c, rays, planes, seg, idx, segs, labs, pairs: _Pairs, by_own, 
     lo_seg, hi_seg = np.minimum(po, pn), np.maximum(po, pn)
     key = lo_seg * g + hi_seg
     if g * g <= 1 << 22:  # counted in place (a few hundred segments), not sorted
-        weight = np.bincount(key, weights=np.where(clean, ALONG_CLEAN, 1), minlength=g * g)
-        edge = np.flatnonzero(weight)
-        e_weight = weight[edge].astype(np.int32)
-        e_clean = np.bincount(key, weights=clean, minlength=g * g)[edge] > 0
+        edge = np.flatnonzero(np.bincount(key, minlength=g * g))
+        inverse = np.searchsorted(edge, key)
     else:
         edge, inverse = np.unique(key, return_inverse=True)
-        e_weight = np.bincount(inverse, weights=np.where(clean, ALONG_CLEAN, 1), minlength=len(edge)).astype(np.int32)
-        e_clean = np.bincount(inverse, weights=clean, minlength=len(edge)) > 0
+    e_weight = np.bincount(inverse, weights=np.where(clean, ALONG_CLEAN, 1), minlength=len(edge)).astype(np.int32)
+    e_clean = np.bincount(inverse, weights=clean, minlength=len(edge)) > 0
     e_lo, e_hi = edge // g, edge % g
     graph = coo_matrix((np.ones(int(e_clean.sum())), (e_lo[e_clean], e_hi[e_clean])), shape=(g, g))
     _, part = connected_components(graph, directed=False)
