@@ -66,6 +66,7 @@ __all__ = ["Labels", "MatchingParams", "denoise", "label_centres", "link_segment
 GAP_PENALTY_MM = 8.0
 SMALL_PIECE = 0.25  # pieces under this share of the largest are left to growth from their neighbours
 SMALL_FLOOR = 0.05  # largest share of a small piece's cells that may conflict at its chosen offset
+ANCHOR_SHARE = 0.8  # share of a small piece's labelled centres that must agree on its offset (``_anchored``)
 _TRACE: list | None = None  # tests and benchmarks may collect the foreground clusters here
 
 
@@ -283,7 +284,8 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
         seg_label.update(_continue_along(c, rays, planes, seg, seg_label, fg_mask, set(fg_labels), link,
                                          0.25 * spacing_mm, lit))
     if fg_labels and small:  # isolated small pieces (a head seen from above) hemmed in by what is placed
-        seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit, table))
+        seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit, table,
+                                      anchor=from_above))
     # the whole animal weighed again, with what joined after the first piece (not after a shallow reading:
     # the grown union's stray conflicts outweigh such a ramp; a spot cow seen from above was placed right
     # and then moved one stripe)
@@ -703,22 +705,33 @@ def _lit_share(rays, planes, ii, k, lit) -> float:
     return float((in_sorted(cells, lit) & in_sorted(cells - 1, lit) & in_sorted(cells + 1, lit)).mean())
 
 
-def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, known, lit, table: BinTable
-                 ) -> dict[int, int]:
+def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, known, lit, table: BinTable,
+                 anchor: bool = False) -> dict[int, int]:
     """Labels for the small pieces that growth from their neighbours did not reach: each is placed only
     where the background and the pieces already labelled hem it in on both sides (the bottom of a V in
-    its conflict curve); the others stay unlabelled. ``known`` (M,) labels (a subset of ``seg_label``'s)
-    whose cells ``lit`` holds; ``table`` : the ``BinTable`` the conflict curves share."""
+    its conflict curve); the others stay unlabelled. A piece growth reached in part is left as it is, or
+    with ``anchor`` (seen from above) read from that part (``_anchored``). ``known`` (M,) labels (a subset
+    of ``seg_label``'s) whose cells ``lit`` holds; ``table`` : the ``BinTable`` the conflict curves share."""
     out: dict[int, int] = {}
     cl = _labels_of(seg, seg_label, long_seg)
     # labels only join seg_label, never change: the centres labelled since add their cells
     lit = union_sorted(lit, lit_cells(rays, planes, cl, np.flatnonzero((cl >= 0) & (cl != known))))
     mid = n // 2
     for idx, trial in small:
-        if (cl[idx] >= 0).any():
+        rel = _relative(seg, trial, mid)
+        known_here = cl[idx] >= 0
+        if known_here.any():
+            off = _anchored(rays, planes, cl, rel, seg, idx, known_here, n, lit, table) if anchor else None
+            if off is None:
+                continue
+            free = idx[~known_here]
+            weighed[free] = True
+            # the labels growth gave stay as they are; the rest of the piece follows them
+            mine = set(seg[free].tolist())
+            out.update({s: k for s, k in _placed(trial, rel, off, n).items() if s in mine and s not in seg_label})
+            lit = _claim(rays, planes, cl, lit, free, rel[seg[free]] + off)
             continue
         weighed[idx] = True
-        rel = _relative(seg, trial, mid)
         curve = conflict_curve(rays, planes, cl, rel[seg], idx, n, lit=lit, table=table)
         # a small piece has few cells to conflict with: a bottom with conflicts is a piece mislinked
         off = sharp_minimum(*curve, max_floor=SMALL_FLOOR) if curve is not None else None
@@ -729,6 +742,36 @@ def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, know
         out.update(_placed(trial, rel, off, n))
         lit = _claim(rays, planes, cl, lit, idx, rel[seg[idx]] + off)
     return out
+
+
+def _anchored(rays, planes, cl, rel, seg, idx, known_here, n, lit, table: BinTable) -> int | None:
+    """The offset of a small piece seen from above (centres ``idx`` (K,), relative labels ``rel`` (S,) per
+    segment) part of which growth from the placed pieces labelled (``known_here`` (K,) bool, labels in
+    ``cl`` (M,)): the one at least ``ANCHOR_SHARE`` of those labels agree on, if the rest of the piece lands
+    there on no more than ``SMALL_FLOOR`` of lit cells and within the pattern (None otherwise).
+
+    Growth stops at the first row pair it doubts; the piece's own relative labels carry its reading on. A
+    head seen from above, joined to the body through a neck whose faint stripes growth only partly crossed,
+    was left unlabelled (the five-seed bench's 50-stripe fur top view of seed 9: 1131 centres, and the body
+    length 19.5 % short). On the bench cache's 172 views (2026-11-23): 1510 more of the animal's centres
+    labelled, all right, in 13 top views; no view lost. Not from the side or end-on: there growth reaches
+    a few segments of wall or floor beside the outline, and reading the rest of such a piece from them
+    labelled 600-2700 background centres in three side views and took a back view from 62 to 55 % right,
+    for no view gained."""
+    implied = cl[idx[known_here]] - rel[seg[idx[known_here]]]
+    offs, counts = np.unique(implied, return_counts=True)
+    best = int(np.argmax(counts))
+    free = idx[~known_here]
+    if counts[best] < ANCHOR_SHARE * len(implied) or len(free) == 0:
+        return None
+    off = int(offs[best])
+    curve = conflict_curve(rays, planes, cl, rel[seg], free, n, lit=lit, table=table)
+    if curve is None:
+        return None
+    conflicts, beyond = curve
+    if off not in conflicts or conflicts[off] > SMALL_FLOOR or max(beyond[off]) > 0.02:
+        return None
+    return off
 
 
 def _claim(rays, planes, cl, lit, idx, lab) -> np.ndarray:

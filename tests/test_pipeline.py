@@ -402,3 +402,23 @@ def test_a_leg_held_to_the_chest_by_a_few_aliased_rows_is_cut_off_and_agrees_alo
     whole animal was placed one stripe low (10 % right). Cut off at the least cut between the two and made
     to agree with the neck, the animal is placed right (98.5 %)."""
     assert _fur_side_view_right(tmp_path, 50, 8) > 0.95
+
+
+def test_a_head_seen_from_above_that_growth_only_reached_at_the_neck_follows_the_neck(tmp_path):
+    """The 50-stripe fur top view, seed 12, at 1536 px: the head is a piece of its own (under a quarter of
+    the body's size, so left to growth from the placed body), and growth labelled only its neck end, a
+    third of it; the head's last four stripes stayed unlabelled and the body length ended at stripe 45
+    (463 mm against 535 on the true stripe points). The labelled third fixes the whole piece's offset
+    (``matching._anchored``): the head is labelled, and right."""
+    from measurement.simulate.capture import write_capture
+
+    cap = write_capture(tmp_path / "top", stripes=50, size=(1536, 1024), seed=12, fur=True, scenes=("top",), poses=0)
+    r = scan(read_image(cap / "scan" / "top.png"), load_calibration(cap / "truth" / "truth.json"), "top")
+    t = dict(np.load(cap / "truth" / "top_stripes.npz"))
+    tk, kind = match_crossings(r.scene_uv.astype(float), t)
+    animal = kind == 5
+    head = animal & (tk >= 46)
+    assert head.sum() >= 0.8 * np.sum((t["kind"] == 5) & (t["stripe"] >= 46))
+    assert np.mean(r.scene_stripe[head] == tk[head]) > 0.99
+    assert np.mean(r.scene_stripe[animal] == tk[animal]) > 0.99
+    assert r.measurements["body_length"]["stripes"][1] == 49
