@@ -1,0 +1,116 @@
+"""Every view in the render cache, scanned and scored: the quick check of a labelling change.
+
+    python bench/cache.py dump OUT.json [--cache /tmp/bodyscan-bench]
+    python bench/cache.py compare BEFORE.json AFTER.json [--view top]
+
+The other benches render their views into the cache (``/tmp/bodyscan-bench`` by default) once; ``dump``
+scans each of them with the checkout's code (the five-seed bench's, the robustness benches' at both sizes:
+about 230 views in under a minute) and writes per view the animal's true crossings, how many of its centres
+were labelled and how many of those right, the background's, the body length and height, and the count of
+wrong labels by their distance from the truth. ``compare`` prints the totals of two dumps over the views
+both hold (views with at least half the animal labelled and 95 % of that right; animal centres right and
+wrong; background centres wrong) and every view whose animal labels or length moved. To compare two
+versions, dump with each checkout's own copy (it imports the checkout it lies in: ``python ../other/bench/cache.py dump B.json``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from measurement.calibration import load_calibration  # noqa: E402
+from measurement.errors import MeasurementError  # noqa: E402
+from measurement.images import read_image  # noqa: E402
+from measurement.pipeline import scan  # noqa: E402
+from measurement.simulate.truth import match_crossings  # noqa: E402
+
+ANIMAL = 5
+
+
+def score_view(cap: Path, view: str) -> dict:
+    """The scores of one cached view (see the module docstring)."""
+    try:
+        r = scan(read_image(cap / "scan" / f"{view}.png"), load_calibration(cap / "truth" / "truth.json"), view)
+    except MeasurementError as exc:
+        return {"error": str(exc)[:200]}
+    t = dict(np.load(cap / "truth" / f"{view}_stripes.npz"))
+    tk, kind = match_crossings(r.scene_uv, t)
+    an, bg = kind == ANIMAL, (kind == 2) | (kind == 3)
+    wrong = an & (r.scene_stripe != tk) & (tk >= 0)
+    diffs, counts = np.unique(r.scene_stripe[wrong] - tk[wrong], return_counts=True)
+    return {
+        "truth": int((t["kind"] == ANIMAL).sum()),
+        "animal_labelled": int(an.sum()), "animal_right": int((r.scene_stripe[an] == tk[an]).sum()),
+        "bg": int(bg.sum()), "bg_right": int((r.scene_stripe[bg] == tk[bg]).sum()),
+        "length": r.measurements.get("body_length_mm"), "height": r.measurements.get("body_height_mm"),
+        "points": int(len(r.points)), "wrong_by_shift": {int(d): int(n) for d, n in zip(diffs, counts, strict=True)},
+    }
+
+
+def dump(cache: Path, out: Path) -> None:
+    t0 = time.perf_counter()
+    views: dict[str, dict] = {}
+    for cap in sorted(p for p in cache.iterdir() if (p / "truth" / "truth.json").exists()):
+        for view in json.loads((cap / "truth" / "truth.json").read_text()).get("views", {}):
+            if (cap / "scan" / f"{view}.png").exists():
+                views[f"{cap.name}/{view}"] = score_view(cap, view)
+    out.write_text(json.dumps({"views": views}, indent=1))
+    print(f"{len(views)} views scored in {time.perf_counter() - t0:.0f} s -> {out}")
+
+
+def placed(v: dict) -> bool:
+    return "error" not in v and v["animal_labelled"] >= 0.5 * v["truth"] and v["animal_right"] >= 0.95 * v["animal_labelled"]
+
+
+def compare(before: Path, after: Path, view: str | None) -> None:
+    a, b = (json.loads(p.read_text())["views"] for p in (before, after))
+    keys = [k for k in sorted(set(a) & set(b)) if view is None or k.endswith("/" + view)]
+
+    def total(d: dict, f) -> int:
+        return sum(f(d[k]) for k in keys if "error" not in d[k])
+
+    rows = (("views placed (half labelled, 95 % of that right)", lambda v: placed(v)),
+            ("animal centres right", lambda v: v["animal_right"]),
+            ("animal centres wrong", lambda v: v["animal_labelled"] - v["animal_right"]),
+            ("background centres wrong", lambda v: v["bg"] - v["bg_right"]))
+    print(f"{len(keys)} views in both dumps")
+    for name, f in rows:
+        x, y = total(a, f), total(b, f)
+        print(f"  {name}: {x} -> {y} ({y - x:+d})")
+    for k in keys:
+        va, vb = a[k], b[k]
+        if any(va.get(f) != vb.get(f) for f in ("error", "animal_labelled", "animal_right", "length")):
+            def show(v: dict) -> str:
+                if "error" in v:
+                    return "refused"
+                share = v["animal_right"] / max(1, v["animal_labelled"])
+                return f"{share:.2%} of {v['animal_labelled']}/{v['truth']} labelled, length {v['length']}"
+            print(f"  {k}: {show(va)} -> {show(vb)}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    d = sub.add_parser("dump")
+    d.add_argument("out", type=Path)
+    d.add_argument("--cache", type=Path, default=Path("/tmp/bodyscan-bench"))
+    c = sub.add_parser("compare")
+    c.add_argument("before", type=Path)
+    c.add_argument("after", type=Path)
+    c.add_argument("--view", choices=("side", "top", "front", "back"))
+    args = ap.parse_args()
+    if args.cmd == "dump":
+        dump(args.cache, args.out)
+    else:
+        compare(args.before, args.after, args.view)
+
+
+if __name__ == "__main__":
+    main()
