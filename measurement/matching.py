@@ -753,9 +753,9 @@ def _anchored(rays, planes, cl, rel, seg, idx, known_here, n, lit, table: BinTab
     Growth stops at the first row pair it doubts; the piece's own relative labels carry its reading on. A
     head seen from above, joined to the body through a neck whose faint stripes growth only partly crossed,
     was left unlabelled (the five-seed bench's 50-stripe fur top view of seed 9: 1131 centres, and the body
-    length 19.5 % short). On the bench cache's 240 views (``bench/cache.py``, 2026-11-23): 1523 more of the
-    animal's centres labelled right, in 14 top views, and 331 wrong, in two top views already wrong (67 and
-    73 % right); no view's placement changed. Not from the side or end-on: there growth reaches a few
+    length 19.5 % short). On the bench cache's 272 views (``bench/cache.py``, 2026-11-23): 3837 more of the
+    animal's centres labelled right, in 16 top views (a weighing platform's 3072 px top views: length 374 ->
+    437 mm), and 331 wrong, in two top views already wrong (67 and 73 % right); no view's placement changed. Not from the side or end-on: there growth reaches a few
     segments of wall or floor beside the outline, and reading the rest of such a piece from them labelled
     600-2700 background centres in three side views and took a back view from 62 to 55 % right, for no
     view gained."""
