@@ -498,3 +498,32 @@ def test_row_order_breaks_drop_both_sides_as_the_numpy_form_does(side):
     order = row_order(c)
     got = _enforce_row_order(c, labels, order)
     assert np.array_equal(got, _enforce_row_order_numpy(c, labels, order)) and (got < labels).any()
+
+
+def test_a_floor_segment_keeps_its_labels_but_where_its_end_leaves_the_floor():
+    """Seen from above, the animal's stripe ends at its flank where the floor's stripe four over runs into
+    it, and the merged peak ends the floor's segment a few millimetres off the floor. Those end centres lose
+    the floor's label (``matching._off_plane_background``); a floor centre that far off mid-segment, and an
+    animal segment off the floor, keep theirs."""
+    from measurement.matching import _off_plane_background
+
+    rng = np.random.default_rng(0)
+    planes = np.array([[1.0, 0.0, 0.0, 10.0 * k] for k in range(8)])  # light plane k: x = 10 k mm
+    floor = np.array([[0.0, 1.0, 0.0, 500.0]])  # y = 500 mm
+    seg, rows, labels, pts = [], [], [], []
+    for s in range(6):  # segments 0-4 on the floor (stripes 1-5), segment 5 the animal (stripe 6)
+        for r in range(40):
+            y = 500.0 + rng.normal(0, 0.05) if s < 5 else 430.0 + r
+            pts.append((10.0 * (s + 1), y, 1200.0 + 2.0 * r))
+            seg.append(s)
+            rows.append(r)
+            labels.append(s + 1)
+    pts = np.array(pts)
+    pts[37:40, 1] = [502.0, 503.0, 504.0]  # segment 0's last three rows leave the floor
+    pts[60, 1] = 503.0  # segment 1, mid-way
+    rays = pts / pts[:, 2:3]
+    seg, rows, labels = np.array(seg), np.array(rows), np.array(labels)
+    out = _off_plane_background(rays, planes, seg, rows, labels, {s: s + 1 for s in range(5)}, floor)
+    dropped = np.flatnonzero(out != labels)
+    assert dropped.tolist() == [37, 38, 39]
+    assert (out[dropped] == -1).all()
