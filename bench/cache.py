@@ -9,7 +9,8 @@ about 230 views in under a minute) and writes per view the animal's true crossin
 were labelled and how many of those right, the background's, the body length and height, and the count of
 wrong labels by their distance from the truth. ``compare`` prints the totals of two dumps over the views
 both hold (views with at least half the animal labelled and 95 % of that right; animal centres right and
-wrong; background centres wrong) and every view whose animal labels or length moved. To compare two
+wrong; background centres wrong; the wrong labels of the views placed in the first dump by their shift from
+the truth) and every view whose animal labels or length moved. To compare two
 versions, dump with each checkout's own copy (it imports the checkout it lies in: ``python ../other/bench/cache.py dump B.json``).
 """
 
@@ -84,6 +85,17 @@ def compare(before: Path, after: Path, view: str | None) -> None:
     for name, f in rows:
         x, y = total(a, f), total(b, f)
         print(f"  {name}: {x} -> {y} ({y - x:+d})")
+    # the wrong labels of the views placed in the first dump, by how far off they are
+    shifts: dict[int, list[int]] = {}
+    for j, d in enumerate((a, b)):
+        for k in keys:
+            if placed(a[k]) and "error" not in d[k]:
+                for shift, count in d[k].get("wrong_by_shift", {}).items():
+                    shifts.setdefault(int(shift), [0, 0])[j] += count
+    if shifts:
+        top = sorted(shifts.items(), key=lambda kv: -max(kv[1]))[:8]
+        print("  wrong labels in the views placed before, by label - truth: "
+              + ", ".join(f"{s:+d}: {x} -> {y}" for s, (x, y) in top))
     for k in keys:
         va, vb = a[k], b[k]
         if any(va.get(f) != vb.get(f) for f in ("error", "animal_labelled", "animal_right", "length")):
