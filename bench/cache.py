@@ -10,8 +10,8 @@ were labelled and how many of those right, the background's, the body length and
 wrong labels by their distance from the truth. ``compare`` prints the totals of two dumps over the views
 both hold (views with at least half the animal labelled and 95 % of that right; animal centres right and
 wrong; background centres wrong; the wrong labels of the views placed in the first dump by their shift from
-the truth) and every view whose animal labels or length moved. To compare two
-versions, dump with each checkout's own copy (it imports the checkout it lies in: ``python ../other/bench/cache.py dump B.json``).
+the truth) and every view whose animal labels or length moved. To compare two versions, dump with each
+checkout's own copy (it imports the checkout it lies in: ``python ../other/bench/cache.py dump B.json``).
 """
 
 from __future__ import annotations
@@ -26,13 +26,12 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from bench.common import ANIMAL  # noqa: E402
 from measurement.calibration import load_calibration  # noqa: E402
 from measurement.errors import MeasurementError  # noqa: E402
 from measurement.images import read_image  # noqa: E402
 from measurement.pipeline import scan  # noqa: E402
 from measurement.simulate.truth import match_crossings  # noqa: E402
-
-ANIMAL = 5
 
 
 def score_view(cap: Path, view: str) -> dict:
@@ -70,6 +69,13 @@ def placed(v: dict) -> bool:
     return "error" not in v and v["animal_labelled"] >= 0.5 * v["truth"] and v["animal_right"] >= 0.95 * v["animal_labelled"]
 
 
+def _shown(v: dict) -> str:
+    if "error" in v:
+        return "refused"
+    share = v["animal_right"] / max(1, v["animal_labelled"])
+    return f"{share:.2%} of {v['animal_labelled']}/{v['truth']} labelled, length {v['length']}"
+
+
 def compare(before: Path, after: Path, view: str | None) -> None:
     a, b = (json.loads(p.read_text())["views"] for p in (before, after))
     keys = [k for k in sorted(set(a) & set(b)) if view is None or k.endswith("/" + view)]
@@ -77,7 +83,7 @@ def compare(before: Path, after: Path, view: str | None) -> None:
     def total(d: dict, f) -> int:
         return sum(f(d[k]) for k in keys if "error" not in d[k])
 
-    rows = (("views placed (half labelled, 95 % of that right)", lambda v: placed(v)),
+    rows = (("views placed (half labelled, 95 % of that right)", placed),
             ("animal centres right", lambda v: v["animal_right"]),
             ("animal centres wrong", lambda v: v["animal_labelled"] - v["animal_right"]),
             ("background centres wrong", lambda v: v["bg"] - v["bg_right"]))
@@ -99,12 +105,7 @@ def compare(before: Path, after: Path, view: str | None) -> None:
     for k in keys:
         va, vb = a[k], b[k]
         if any(va.get(f) != vb.get(f) for f in ("error", "animal_labelled", "animal_right", "length")):
-            def show(v: dict) -> str:
-                if "error" in v:
-                    return "refused"
-                share = v["animal_right"] / max(1, v["animal_labelled"])
-                return f"{share:.2%} of {v['animal_labelled']}/{v['truth']} labelled, length {v['length']}"
-            print(f"  {k}: {show(va)} -> {show(vb)}")
+            print(f"  {k}: {_shown(va)} -> {_shown(vb)}")
 
 
 def main() -> None:

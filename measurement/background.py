@@ -208,7 +208,7 @@ def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, mi
     """Unlabelled segments that exactly one stripe index puts on a background plane (>= ``share`` of
     their points within ``tol_mm``), and as flat as the background labelled so far on the plane they are
     nearest to: the median distance of their points from it at most ``flatness`` times that of the
-    labelled background's points nearest to it (``_background_flatness``).
+    labelled background's points nearest to it (``background_flatness``).
     Animal stripes are curved and fit no single plane that way; a short piece of one (a tail's stripe cut
     by fur) can still land within ``tol_mm`` of the floor at some wrong index, but not as flat as the
     floor (over the 3072 px and 1536 px benches, the claims above 4x the floor's median distance were 141
@@ -227,7 +227,7 @@ def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, mi
     sizes = np.bincount(seg[cand], minlength=seg.max() + 1)
     sids = np.nonzero(sizes >= min_rows)[0]
     # the labelled background's flatness, on the second core while the candidates are weighed
-    flatness_bg = second_core().submit(_background_flatness, rays, planes, seg, seg_label, bg_planes)
+    flatness_bg = second_core().submit(background_flatness, rays, planes, seg, seg_label, bg_planes)
     frac, idx, starts = _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm)
     hits = frac >= share
     one = np.nonzero(hits.sum(axis=1) == 1)[0]
@@ -255,7 +255,7 @@ def _group_medians(x: np.ndarray, counts: np.ndarray) -> np.ndarray:
     return _kernels.group_medians(np.ascontiguousarray(x, dtype=np.float64), counts.astype(np.int64))
 
 
-def _background_flatness(rays, planes, seg, seg_label: dict[int, int], bg_planes, most: int = 20000,
+def background_flatness(rays, planes, seg, seg_label: dict[int, int], bg_planes, most: int = 20000,
                          min_points: int = 200, least_mm: float = 0.1) -> np.ndarray:
     """Per background plane (P,): the noise in depth (mm) its claims are held to: the median distance from
     it of the labelled background's points (segment -> index ``seg_label``, at most ``most`` of them,

@@ -27,7 +27,7 @@ import numpy as np
 from . import _kernels
 from .background import (
     Footprints,
-    _background_flatness,
+    background_flatness,
     background_like,
     background_planes,
     claim_background,
@@ -55,6 +55,7 @@ from .segments import (
     link_segments,
     row_neighbours,
     row_order,
+    runs,
     segment_rows,
     smooth_along_segments,
     spans,
@@ -314,7 +315,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
 def _off_plane_background(rays, planes, seg, rows, labels, bg_labels: dict[int, int], bg_planes) -> np.ndarray:
     """``labels`` (M,) without the end centres of background segments (``bg_labels``; their first and last
     ``OFF_PLANE_ENDS``, by ``rows`` (M,)) that lie more than ``OFF_PLANE`` times their nearest background
-    plane's noise (``background._background_flatness``: the median distance of its labelled points, at least
+    plane's noise (``background.background_flatness``: the median distance of its labelled points, at least
     0.1 mm) off it. Such a centre is no clean crossing of the floor: seen from above, where the animal's
     stripe ends at its flank the floor's stripe four over runs into it (the depth alias), and the two peaks
     merge into one centre the floor's segment keeps (its last two to four rows leave the plane by 1.3-4 mm,
@@ -338,11 +339,11 @@ def _off_plane_background(rays, planes, seg, rows, labels, bg_labels: dict[int, 
         return labels
     # only a segment's first and last OFF_PLANE_ENDS centres are weighed: that is where the merges are
     idx = idx[segment_rows(seg[idx], rows[idx])]
-    run = np.r_[0, np.flatnonzero(np.diff(seg[idx])) + 1, len(idx)]
+    run = runs(seg[idx])
     count = np.diff(run)
     at = np.arange(len(idx)) - np.repeat(run[:-1], count)
     idx = idx[(at < OFF_PLANE_ENDS) | (np.repeat(count, count) - at <= OFF_PLANE_ENDS)]
-    noise = _background_flatness(rays, planes, seg, bg_labels, bg_planes, most=4000)
+    noise = background_flatness(rays, planes, seg, bg_labels, bg_planes, most=4000)
     d = np.abs(intersect(rays.take(idx, axis=0), planes.take(labels[idx], axis=0)) @ bg_planes[:, :3].T - bg_planes[:, 3])
     j = d.argmin(axis=1)
     off = d[np.arange(len(idx)), j] > OFF_PLANE * noise[j]
@@ -800,10 +801,10 @@ def _anchored(rays, planes, cl, rel, seg, idx, known_here, n, lit, table: BinTab
     was left unlabelled (the five-seed bench's 50-stripe fur top view of seed 9: 1131 centres, and the body
     length 19.5 % short). On the bench cache's 272 views (``bench/cache.py``, 2026-11-23): 3837 more of the
     animal's centres labelled right, in 16 top views (a weighing platform's 3072 px top views: length 374 ->
-    437 mm), and 331 wrong, in two top views already wrong (67 and 73 % right); no view's placement changed. Not from the side or end-on: there growth reaches a few
-    segments of wall or floor beside the outline, and reading the rest of such a piece from them labelled
-    600-2700 background centres in three side views and took a back view from 62 to 55 % right, for no
-    view gained."""
+    437 mm), and 331 wrong, in two top views already wrong (67 and 73 % right); no view's placement
+    changed. Not from the side or end-on: there growth reaches a few segments of wall or floor beside the
+    outline, and reading the rest of such a piece from them labelled 600-2700 background centres in three
+    side views and took a back view from 62 to 55 % right, for no view gained."""
     implied = cl[idx[known_here]] - rel[seg[idx[known_here]]]
     offs, counts = np.unique(implied, return_counts=True)
     best = int(np.argmax(counts))

@@ -73,7 +73,7 @@ def split_at_changes(c: Centres, seg: np.ndarray, window: int = 8, ratio: float 
     out = seg.copy()
     order = segment_rows(seg, c.v)
     logc = np.log(np.maximum(c.contrast.astype(np.float64), 1.0))
-    _kernels.change_cuts(order, _runs(seg[order]), logc, c.u, c.v.astype(np.float64), window,
+    _kernels.change_cuts(order, runs(seg[order]), logc, c.u, c.v.astype(np.float64), window,
                          float(np.log(ratio)), slope_change, out, int(seg.max()) + 1)
     return out
 
@@ -88,7 +88,7 @@ def segment_rows(seg: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.lexsort((v, seg))
 
 
-def _runs(keys: np.ndarray) -> np.ndarray:
+def runs(keys: np.ndarray) -> np.ndarray:
     """Start offsets (R + 1,) of the runs of equal values in sorted ``keys`` (K,), closed by len(keys)."""
     return np.r_[0, np.nonzero(keys[1:] != keys[:-1])[0] + 1, len(keys)]
 
@@ -119,7 +119,7 @@ def smooth_along_segments(c: Centres, segment: np.ndarray, labels: np.ndarray, h
     if len(idx) == 0:
         return u, keep
     order = idx[segment_rows(segment[idx], c.v[idx])]
-    _kernels.smooth_runs(order, _runs(segment[order]), c.u, half, outlier_px, u, keep)
+    _kernels.smooth_runs(order, runs(segment[order]), c.u, half, outlier_px, u, keep)
     return u, keep
 
 
