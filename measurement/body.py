@@ -153,22 +153,79 @@ def _extents(points: np.ndarray, first: np.ndarray, last: np.ndarray, trim: floa
     return ext, ends
 
 
-def _extent(points: np.ndarray, trim: float) -> tuple[float, np.ndarray]:
-    """Robust extent of a group along its principal direction and its two extreme points (2, 3).
-    Specks beyond Tukey's fences (1.5 interquartile ranges) are dropped before the extremes are taken."""
+ENDS_WEIGHED = 0.85  # groups whose extent without the faint ends is at least this share of the largest
+ENDS_STEP_MM = 8.0  # a faint end's first point lies this close to its group's extremes, or it is not read
+
+
+def _with_ends(grouped: np.ndarray, first: np.ndarray, last: np.ndarray, ks: np.ndarray,
+               ends: tuple[np.ndarray, np.ndarray, np.ndarray], trim: float, exts: np.ndarray,
+               all_ends: np.ndarray) -> int:
+    """The extents (in ``exts`` and ``all_ends``, in place) of the groups that may be the largest (at least
+    ``ENDS_WEIGHED`` of it), read with their stripes' faint ends ``ends`` (points (E, 3) mm, stripe (E,),
+    the walk (E,) each came from, its points in order). Returns how many end points were read."""
+    used = 0
+    for g in np.flatnonzero(exts >= ENDS_WEIGHED * np.nanmax(exts)):
+        mine = ends[1] == ks[g]
+        if not mine.any():
+            continue
+        extra, walk = ends[0][mine], ends[2][mine]
+        walks, start_of = np.unique(walk, return_index=True)
+        start = start_of[np.searchsorted(walks, walk)]
+        x = grouped[first[g]:last[g]]
+        e, n = np.nan, 0
+        if np.isfinite(x).all() and np.isfinite(extra).all():
+            e, n = _kernels.group_extent_with(x, np.ascontiguousarray(extra, np.float64), start, trim,
+                                              ENDS_STEP_MM, all_ends[g])
+        if np.isnan(e):
+            e, all_ends[g], n = _extent_with(x, extra, walk, trim)
+        exts[g] = e
+        used += int(n)
+    return used
+
+
+def _extent_with(points: np.ndarray, extra: np.ndarray, walk: np.ndarray, trim: float
+                 ) -> tuple[float, np.ndarray, int]:
+    """``_extent`` of points (K, 3) with the ``extra`` points (E, 3) that fall within its fences: the
+    group's direction and fences are its own points' (extra points extend its extremes, they cannot change
+    which part of a stripe counts). ``walk`` (E,): the walk each extra point came from, in order; a walk
+    counts only if its first point lies within ``ENDS_STEP_MM`` of the group's own trimmed extremes (the end
+    of a stray bit of stripe past them, a few points the trim left out, extends nothing). Returns the
+    extent, the two extreme points (2, 3) and how many extra points were read."""
+    c, axis, t, keep, lo_f, hi_f = _fenced(points)
+    lo0, hi0 = _quantiles(t[keep], (trim, 1 - trim))
+    te = (extra - c) @ axis
+    walks, start = np.unique(walk, return_index=True)
+    t0 = te[start]
+    starts_inside = (t0 >= lo0 - ENDS_STEP_MM) & (t0 <= hi0 + ENDS_STEP_MM)
+    inside = (te >= lo_f) & (te <= hi_f) & starts_inside[np.searchsorted(walks, walk)]
+    lo, hi = _quantiles(np.r_[t[keep], te[inside]], (trim, 1 - trim))
+    return float(hi - lo), np.array([c + lo * axis, c + hi * axis]), int(inside.sum())
+
+
+def _fenced(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float, float]:
+    """``_extent``'s fencing: the centre (3,), principal direction (3,), each point's coordinate along it
+    (K,), the points within Tukey's fences (K,) bool, and the fences."""
     keep = np.ones(len(points), bool)
+    lo_f, hi_f = -np.inf, np.inf
     for _ in range(2):
         c = _column_medians(points[keep])
         _, _, vt = np.linalg.svd(points[keep] - c, full_matrices=False)
         t = (points - c) @ vt[0]
         q1, q3 = _quantiles(t[keep], (0.25, 0.75))
-        fenced = (t >= q1 - 1.5 * (q3 - q1)) & (t <= q3 + 1.5 * (q3 - q1))
+        lo_f, hi_f = q1 - 1.5 * (q3 - q1), q3 + 1.5 * (q3 - q1)
+        fenced = (t >= lo_f) & (t <= hi_f)
         if (fenced == keep).all():  # nothing dropped: another pass would repeat this one exactly
             break
         keep = fenced
+    return c, vt[0], t, keep, lo_f, hi_f
+
+
+def _extent(points: np.ndarray, trim: float) -> tuple[float, np.ndarray]:
+    """Robust extent of a group along its principal direction and its two extreme points (2, 3).
+    Specks beyond Tukey's fences (1.5 interquartile ranges) are dropped before the extremes are taken."""
+    c, axis, t, keep, _, _ = _fenced(points)
     lo, hi = _quantiles(t[keep], (trim, 1 - trim))
-    ends = np.array([c + lo * vt[0], c + hi * vt[0]])
-    return float(hi - lo), ends
+    return float(hi - lo), np.array([c + lo * axis, c + hi * axis])
 
 
 def _column_medians(x: np.ndarray) -> np.ndarray:
@@ -203,10 +260,14 @@ def _quantiles(x: np.ndarray, qs: tuple[float, ...]) -> list[float]:
 
 
 def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
-            params: BodyParams = BodyParams()) -> dict:
+            params: BodyParams = BodyParams(), ends: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+            ) -> dict:
     """Automatic measurements of an isolated animal cloud.
 
     points (N, 3) mm, stripe (N,) index, rows (N,) image row of each point.
+    ends : points (E, 3) mm, stripe indices (E,) and walks (E,) of the stripes' faint ends (``ends``): the
+           per-stripe extents (height, or width from above) read them with the group's points; the groups
+           (at least ``min_group`` points of the cloud) and the length are the cloud's alone.
     """
     out: dict = {"view": view, "point_count": int(len(points))}
     ks, counts = _stripe_counts(stripe)
@@ -223,12 +284,15 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
     order = _stable_order(stripe)
     ks_sorted, ks_arr = stripe[order], np.array(groups)
     first, last = np.searchsorted(ks_sorted, ks_arr), np.searchsorted(ks_sorted, ks_arr, side="right")
-    exts, all_ends = _extents(np.asarray(points[order], np.float64), first, last, params.trim)
+    grouped = np.asarray(points[order], np.float64)
+    exts, all_ends = _extents(grouped, first, last, params.trim)
+    if ends is not None and len(ends[1]):
+        out["faint_end_points"] = _with_ends(grouped, first, last, ks_arr, ends, params.trim, exts, all_ends)
     best = max(range(len(groups)), key=lambda g: exts[g])  # the first of equals, as max() of the groups
-    ext, ends, k_best = float(exts[best]), all_ends[best], groups[best]
+    ext, extremes, k_best = float(exts[best]), all_ends[best], groups[best]
     name = "body_width" if view == "top" else "body_height"
     out["body_height_mm"] = round(ext, 2)
-    out[name] = {"value_mm": round(ext, 2), "stripe": k_best, "points": ends.tolist()}
+    out[name] = {"value_mm": round(ext, 2), "stripe": k_best, "points": extremes.tolist()}
     out["body_height_is"] = name
     length = length_job.result()
     if length is not None:

@@ -50,6 +50,11 @@ class DetectionParams:
                     rising side of an albedo or shadow edge is not)
     max_width     : a reliable centre is at most this many times the image's median stripe width (a stripe
                     widened by a grazing surface has its centroid off the plane's image)
+    faint_contrast, faint_k : ``detect_centres_and_faint`` also lists the faint peaks, above
+                    max(faint_contrast, faint_k x the smoothed noise) but not above min_contrast, two-sided
+                    (see min_flank), apart from the centres: where a stripe grazes the outline (the flank seen
+                    from above, the back of a dark coat) its last rows fade below min_contrast, and the
+                    measurement's per-stripe extents read them (``ends``); the labelling never sees them
     """
 
     background_px: int = 17
@@ -63,6 +68,8 @@ class DetectionParams:
     min_flank: float = 4.0
     flank_ratio: float = 0.5
     max_width: float = 1.5
+    faint_contrast: float = 3.0
+    faint_k: float = 2.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -142,6 +149,18 @@ def detect_centres(image: np.ndarray, params: DetectionParams = DetectionParams(
     ambient : optional image of the same view with the projector off; subtracting it cancels room light
               and, with the stripe image, most of the albedo's texture
     """
+    return _detect(image, params, ambient, faint=False)[0]
+
+
+def detect_centres_and_faint(image: np.ndarray, params: DetectionParams = DetectionParams(),
+                             ambient: np.ndarray | None = None) -> tuple[Centres, Centres]:
+    """``detect_centres``' centres (the same to the bit) and, apart from them, the faint peaks
+    (``DetectionParams.faint_contrast``) found in the same pass."""
+    return _detect(image, params, ambient, faint=True)
+
+
+def _detect(image: np.ndarray, params: DetectionParams, ambient: np.ndarray | None, faint: bool
+            ) -> tuple[Centres, Centres]:
     bits = sample_bits(np.asarray(image))  # the ambient image is scaled as the stripe image is
     g = to_gray8(image, bits=bits)
     if ambient is not None:
@@ -162,19 +181,27 @@ def detect_centres(image: np.ndarray, params: DetectionParams = DetectionParams(
                                        "or was the projector on for both?)")
     noise = noise_sigma(g) * smoothing_gain(params, g.shape[1])
     params = replace(params, min_contrast=max(params.min_contrast, params.noise_k * noise))
+    hysteresis = 0 < params.weak_contrast < params.min_contrast
+    faint_low = max(params.faint_contrast, params.faint_k * noise) if faint and not hysteresis else 0.0
+    if faint_low >= params.min_contrast:
+        faint_low = 0.0
     # the frame is filtered in bands of rows (each with enough rows above and below for the vertical blur),
     # so the filters' images stay in cache, and the bands share the cores (OpenCV and NumPy release the
     # GIL): the same centres to the bit
     h, w = g.shape
     # (the flat top of a wide stripe is a run of equal gray levels that a one-level dip can cut in two:
     # both halves pass the non-maximum suppression and refine to the same centroid; the bands keep one)
-    x, y, u, contrast, width, flank = _all_bands(g, params)
+    x, y, u, contrast, width, flank = _all_bands(g, params, faint_low)
     c = Centres(u, y.astype(np.int32), contrast, width, flank)
-    if params.weak_contrast <= 0 or params.weak_contrast >= params.min_contrast:
-        return c
+    if faint_low > 0:
+        strong = contrast > params.min_contrast
+        return c.take(strong), c.take(~strong & (flank >= params.flank_ratio * contrast))
+    none = c.take(np.zeros(len(c), bool))
+    if not hysteresis:
+        return c, none
     strong = c.contrast > params.min_contrast
     weak = ~strong & (flank >= params.flank_ratio * c.contrast)
-    return c.take(strong | _linked(x, y, w, strong, weak, params.link_px * w / 3072.0))
+    return c.take(strong | _linked(x, y, w, strong, weak, params.link_px * w / 3072.0)), none
 
 
 AMBIENT_PEDESTAL = 32  # gray levels added back after subtracting the ambient image
@@ -194,10 +221,11 @@ _BAND_ROWS = 256
 _WORKERS = min(4, os.cpu_count() or 1)
 
 
-def _all_bands(g: np.ndarray, params: DetectionParams) -> tuple[np.ndarray, ...]:
-    """x, y, u, contrast, width, flank of every candidate in the gray image g (H, W), in raster order."""
+def _all_bands(g: np.ndarray, params: DetectionParams, faint: float = 0.0) -> tuple[np.ndarray, ...]:
+    """x, y, u, contrast, width, flank of every candidate in the gray image g (H, W), in raster order
+    (``_band_centres``)."""
     h = g.shape[0]
-    found = list(band_workers(_WORKERS).map(lambda a: _band_centres(g, a, min(a + _BAND_ROWS, h), params),
+    found = list(band_workers(_WORKERS).map(lambda a: _band_centres(g, a, min(a + _BAND_ROWS, h), params, faint),
                                             range(0, h, _BAND_ROWS)))
     return tuple(np.concatenate(z) for z in zip(*found, strict=True))
 
@@ -228,10 +256,11 @@ def noise_sigma(g: np.ndarray) -> float:
     return float(middle.sum()) / 2 / (0.6745 * np.sqrt(2.0))
 
 
-def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams
+def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams, faint: float = 0.0
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Candidate centres of rows a..b-1 of the gray image g (H, W) uint8, one per peak: x, y (int64 pixels),
-    u, contrast, width and flank (see Centres), in raster order."""
+    u, contrast, width and flank (see Centres), in raster order. With ``faint`` (> 0, under min_contrast)
+    the peaks above it are listed too, and those above min_contrast come out as without them."""
     h, w = g.shape
     sigma_y = params.sigma_y * max(w / 3072.0, 0.5)
     margin = int(4 * sigma_y) + 2  # beyond the blur's reach (OpenCV's 8-bit kernel: radius ~3 sigma)
@@ -242,6 +271,8 @@ def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams
     contrast = cv2.subtract(s, bg)
     peak = cv2.dilate(s, np.ones((1, 2 * _scaled(params.peak_px, w) + 1), np.uint8))
     low = params.weak_contrast if params.weak_contrast > 0 else params.min_contrast
+    if faint > 0:
+        low = min(low, faint)
     # 0/1: as bright as every pixel within peak_px columns, and more than low above the background
     strong = cv2.threshold(contrast, int(low), 1, cv2.THRESH_BINARY)[1]
     cand = cv2.bitwise_and(cv2.compare(s, peak, cv2.CMP_EQ), strong)
@@ -250,7 +281,8 @@ def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams
     # form they replaced is in tests/test_detection_kernels.py)
     at = _kernels.first_peaks(cand, s)
     half = _scaled(params.background_px, w) // 2 + 1
-    x, y, u, width, flank, contrast_at = _kernels.refine_peaks(s, bg, at, half, a)
+    strong_at = float(params.min_contrast) if faint > 0 else np.inf
+    x, y, u, width, flank, contrast_at = _kernels.refine_peaks(s, bg, at, half, a, strong_at)
     return x, y, u, contrast_at, width, flank
 
 

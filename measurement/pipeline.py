@@ -14,7 +14,8 @@ import numpy as np
 
 from .body import BodyParams, isolate, measure
 from .calibration import Calibration
-from .detection import DetectionParams, check_image, detect_centres, reliable
+from .detection import DetectionParams, check_image, detect_centres_and_faint, reliable
+from .ends import MERGE_ROWS, end_points, faint_ends
 from .errors import ImageError, ScanError
 from .matching import Labels, MatchingParams, denoise, label_centres, smooth_along_segments
 from .orientation import stripe_axis, swap_xy, transpose_image
@@ -29,6 +30,7 @@ class ScanParams:
     detection: DetectionParams = field(default_factory=DetectionParams)
     matching: MatchingParams = field(default_factory=MatchingParams)
     body: BodyParams = field(default_factory=BodyParams)
+    faint_ends: bool = True  # per-stripe extents read each stripe's faint ends (``ends``)
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,7 +102,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     size = calibration.intrinsics.image_size
     check_image(image, (size[1], size[0]) if calibration.transposed else size)
     t = {"start": time.perf_counter()}
-    centres = detect_centres(image, params.detection, ambient)
+    centres, faint = detect_centres_and_faint(image, params.detection, ambient)
     t["detect"] = time.perf_counter()
     if len(centres) and params.matching.denoise:
         centres = centres.take(denoise(centres, image.shape[:2]))
@@ -140,7 +142,15 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     t["triangulate"] = time.perf_counter()
     animal = isolate(pts, labels.background, params.body)
     animal_pts, animal_stripe = pts[animal], stripe[animal]
-    meas = measure(animal_pts, animal_stripe, rows[animal], view, params.body)
+    ends = None
+    if params.faint_ends and len(animal_pts):
+        eu, ev, ek, ew = faint_ends(centres, labels.stripe, seg_ids, idx[animal], idx, faint,
+                                    params.matching.link_px * max(image.shape[1] / 3072.0, 0.5), image.shape[0])
+        if len(eu):
+            ep, keep = end_points(eu, ev, ek, ew, table, calibration.planes, labels.background,
+                                  params.body.background_mm, max(1, round(MERGE_ROWS * image.shape[0] / 2048)))
+            ends = (ep[keep], ek[keep], ew[keep])
+    meas = measure(animal_pts, animal_stripe, rows[animal], view, params.body, ends)
     t["measure"] = time.perf_counter()
     stages = ["start", "detect", "denoise", "match", "triangulate", "measure"]
     timings = {s: round(1000 * (t[s] - t[p]), 2) for p, s in zip(stages, stages[1:], strict=False)}

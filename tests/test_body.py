@@ -268,3 +268,70 @@ def test_stripe_groups_are_ordered_as_a_stable_argsort_orders_them():
     rng = np.random.default_rng(12)
     for stripe in (rng.integers(0, 50, 3000), rng.integers(0, 50, 3000).astype(np.int32), np.zeros(0, np.int64)):
         assert np.array_equal(_stable_order(stripe), np.argsort(stripe, kind="stable"))
+
+
+def _line(n=101, length=100.0):
+    """A stripe group of n points along x from 0 to ``length`` mm (a straight stripe seen end to end)."""
+    x = np.linspace(0.0, length, n)
+    return np.column_stack([x, 0.01 * np.sin(x), np.full(n, 1200.0)])
+
+
+def test_a_faint_end_continuing_a_stripe_extends_its_extent():
+    from measurement.body import _extent, _extent_with
+
+    pts = _line()
+    extra = np.column_stack([np.arange(101.0, 121.0), np.zeros(20), np.full(20, 1200.0)])
+    alone, _ = _extent(pts, 0.01)
+    with_end, ends, used = _extent_with(pts, extra, np.zeros(20, np.int64), 0.01)
+    assert used == 20 and with_end > alone + 15.0
+    assert ends[:, 0].max() > 118.0
+
+
+def test_the_end_of_a_stray_bit_past_the_trimmed_extremes_extends_nothing():
+    from measurement.body import _extent, _extent_with
+
+    pts = np.vstack([_line(), [[140.0, 0.0, 1200.0]]])  # a speck the 1 % trim leaves out, within the fences
+    extra = np.column_stack([np.arange(141.0, 149.0), np.zeros(8), np.full(8, 1200.0)])  # walked on from it
+    alone, _ = _extent(pts, 0.01)
+    with_end, _, used = _extent_with(pts, extra, np.zeros(8, np.int64), 0.01)
+    assert used == 0 and with_end == alone
+    # walked on from the group's end instead, the same kind of points count
+    extra = np.column_stack([np.arange(101.0, 109.0), np.zeros(8), np.full(8, 1200.0)])
+    assert _extent_with(pts, extra, np.zeros(8, np.int64), 0.01)[2] == 8
+
+
+def test_faint_ends_change_the_extents_only():
+    pts, stripe, rows = _barrel()
+    keep = np.abs(pts[:, 1]) < 80  # every stripe loses its last rows at both ends
+    plain = measure(pts[keep], stripe[keep], rows[keep], "side")
+    up = np.flatnonzero(~keep & (stripe == 7) & (pts[:, 1] > 0))
+    down = np.flatnonzero(~keep & (stripe == 7) & (pts[:, 1] < 0))[::-1]  # each walk from the stripe's end out
+    lost = np.r_[up, down]
+    walk = np.r_[np.zeros(len(up), np.int64), np.ones(len(down), np.int64)]
+    ended = measure(pts[keep], stripe[keep], rows[keep], "side", ends=(pts[lost], stripe[lost], walk))
+    assert ended["body_height_mm"] > plain["body_height_mm"] + 30.0
+    assert ended["body_height"]["stripe"] == 7 and ended["faint_end_points"] == len(lost)
+    assert ended["body_length_mm"] == plain["body_length_mm"]
+    assert ended["stripes_detected"] == plain["stripes_detected"]
+
+
+def test_compiled_extents_with_faint_ends_equal_the_numpy_ones():
+    from measurement import _kernels
+    from measurement.body import ENDS_STEP_MM, _extent_with
+
+    rng = np.random.default_rng(3)
+    for seed in range(6):
+        pts, stripe = _groups(seed)
+        for k in np.unique(stripe):
+            x = pts[stripe == k]
+            if len(x) < 12:
+                continue
+            extra = x[rng.integers(0, len(x), 30)] * rng.uniform(0.9, 1.4) + rng.normal(size=(30, 3))
+            walk = np.sort(rng.integers(0, 4, 30))
+            want, want_ends, want_n = _extent_with(x, extra, walk, 0.01)
+            walks, first = np.unique(walk, return_index=True)
+            ends = np.zeros((2, 3))
+            got, n = _kernels.group_extent_with(x, extra, first[np.searchsorted(walks, walk)], 0.01, ENDS_STEP_MM,
+                                                ends)
+            assert abs(got - want) <= 1e-9 * max(abs(want), 1.0) and n == want_n
+            assert np.allclose(ends, want_ends, rtol=1e-12, atol=1e-9)

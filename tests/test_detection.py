@@ -11,6 +11,7 @@ from measurement.detection import (
     algorithm2_centres,
     check_image,
     detect_centres,
+    detect_centres_and_faint,
     noise_sigma,
     reliable,
     subtract_ambient,
@@ -108,6 +109,24 @@ def test_with_hysteresis_a_faint_stripe_end_is_followed_from_its_bright_part_but
     assert not (np.abs(c.u - 1500) < 5).any()  # a faint stripe linked to no bright one is not
     off = detect_centres(img)  # hysteresis is off by default
     assert not ((np.abs(off.u - 500) < 1) & (off.v >= 45)).any()
+
+
+def test_the_faint_peaks_are_listed_apart_and_leave_the_centres_as_they_were(small_capture):
+    x = np.arange(3072, dtype=float)
+    bright = 20 + 60 * np.exp(-0.5 * ((x - 500) / 2.0) ** 2)
+    faint = 20 + 7 * (np.exp(-0.5 * ((x - 500) / 2.0) ** 2) + np.exp(-0.5 * ((x - 1500) / 2.0) ** 2))
+    img = np.vstack([_row_image(bright, 40), _row_image(faint, 40)])
+    centres, weak = detect_centres_and_faint(img)
+    assert not (centres.v >= 45).any()  # the faint rows hold no centre
+    for col in (500, 1500):
+        assert set(range(45, 80)) <= set(weak.v[np.abs(weak.u - col) < 1].tolist())
+    # on a rendered view the centres are detect_centres' to the bit
+    img, _ = _side(small_capture)
+    alone = detect_centres(img)
+    centres, weak = detect_centres_and_faint(img)
+    assert len(weak) > 0
+    for name in ("u", "v", "contrast", "width", "flank"):
+        assert np.array_equal(getattr(alone, name), getattr(centres, name))
 
 
 def test_unreliable_centres_are_mostly_off_the_true_crossings(small_capture):

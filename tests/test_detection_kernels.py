@@ -128,3 +128,35 @@ def test_sample_levels_are_those_of_the_strided_sample():
         sample = g[::4, ::4]
         assert _kernels.sample_levels(g, 4, 250) == (int((sample >= 250).sum()), int(sample.min()),
                                                      int(sample.max()), sample.size)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_strong_peaks_come_out_alike_whether_the_faint_ones_are_listed_or_not(seed):
+    s = _stripes(40, 301, seed)
+    bg = cv2.erode(s, np.ones((1, 17), np.uint8))
+    half, strong = 9, 8.0
+    both = _kernels.refine_peaks(s, bg, _kernels.first_peaks(_candidates(s, bg, 3), s), half, 0, strong)
+    alone = _kernels.refine_peaks(s, bg, _kernels.first_peaks(_candidates(s, bg, 8), s), half, 0)
+    kept = both[5] > strong
+    assert (~kept).any()  # faint peaks were listed
+    assert all(np.array_equal(p[kept], q) for p, q in zip(both, alone, strict=True))
+
+
+def _candidates(s, bg, low):
+    """0/1 mask of the pixels as bright as every one within 4 columns and more than ``low`` over bg."""
+    peak = cv2.dilate(s, np.ones((1, 9), np.uint8))
+    return cv2.bitwise_and(cv2.compare(s, peak, cv2.CMP_EQ), cv2.threshold(cv2.subtract(s, bg), low, 1,
+                                                                              cv2.THRESH_BINARY)[1])
+
+
+def test_a_strong_second_half_of_a_flat_top_replaces_its_faint_first_half():
+    """One flat top cut by a dip into two first pixels, 3 and 6, both refining to column 5.0: over a local
+    background of 14 the first stands 6 gray levels high (faint), over 10 the second 10 (a centre). Listed
+    alone, the second is the centre; listed after the faint first, it must still be."""
+    s = np.array([[10, 10, 10, 20, 20, 19, 20, 20, 10, 10, 10, 10, 10, 10]], np.uint8)
+    bg = np.full_like(s, 10)
+    bg[0, 3] = 14
+    x, _, u, _, _, contrast = _kernels.refine_peaks(s, bg, np.array([3, 6]), 4, 0, 8.0)
+    assert x.tolist() == [6] and u.tolist() == [5.0] and contrast.tolist() == [10.0]
+    x, *_ = _kernels.refine_peaks(s, bg, np.array([3, 6]), 4, 0)  # every peak weighed against every other
+    assert x.tolist() == [3]

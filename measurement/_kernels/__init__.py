@@ -12,7 +12,7 @@ kernels are compiled in memory on each start."""
 from __future__ import annotations
 
 from .background import first_of_each, group_counts, group_medians, inlier_counts, near_any_plane
-from .body import group_extents, plane_distances, voxel_cells
+from .body import group_extent_with, group_extents, plane_distances, voxel_cells
 from .cloud import cloud_points, rays_and_cells
 from .detection import difference_counts, first_peaks, refine_peaks, sample_levels
 from .growth import (
@@ -41,6 +41,7 @@ from .segments import (
     segment_row_order,
     smooth_runs,
     stable_group_order,
+    walk_ends,
 )
 
 __all__ = [
@@ -58,6 +59,7 @@ __all__ = [
     "gap_votes",
     "gapped_rows",
     "group_counts",
+    "group_extent_with",
     "group_extents",
     "group_medians",
     "group_members",
@@ -87,4 +89,5 @@ __all__ = [
     "stable_group_order",
     "voting_pairs",
     "voxel_cells",
+    "walk_ends",
 ]

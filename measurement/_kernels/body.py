@@ -61,18 +61,18 @@ def _centre(x, keep):
 
 
 @compiled
-def group_extent(x, trim, ends):
-    """``body._extent`` of one group x (n, 3) float64 mm, finite: the robust extent (mm) along its
-    principal direction, its two extreme points into ``ends`` (2, 3); NaN when a pass keeps fewer than 5
-    points (LAPACK then takes another path than the QR: the caller falls back to NumPy)."""
+def _fences(x, keep, t):
+    """``body._fenced`` of one group x (n, 3) float64 mm, finite: fills ``keep`` (n,) (all True on entry)
+    and ``t`` (n,) and returns the centre (3,), the direction (3,) and the two fences; NaN fences when a
+    pass keeps fewer than 5 points (LAPACK then takes another path than the QR: the caller falls back to
+    NumPy)."""
     n = len(x)
-    keep = np.ones(n, np.bool_)
-    t = np.empty(n)
     c = np.zeros(3)
     v = np.zeros(3)
+    lo_fence, hi_fence = np.nan, np.nan
     for _ in range(2):
         if keep.sum() < 5:
-            return np.nan
+            return c, v, np.nan, np.nan
         c = _centre(x, keep)
         v = _direction(x, keep, c)
         for i in range(n):
@@ -87,12 +87,57 @@ def group_extent(x, trim, ends):
             keep[i] = f
         if same:
             break
+    return c, v, lo_fence, hi_fence
+
+
+@compiled
+def group_extent(x, trim, ends):
+    """``body._extent`` of one group x (n, 3) float64 mm, finite: the robust extent (mm) along its
+    principal direction, its two extreme points into ``ends`` (2, 3); NaN when a pass keeps fewer than 5
+    points (LAPACK then takes another path than the QR: the caller falls back to NumPy)."""
+    n = len(x)
+    keep = np.ones(n, np.bool_)
+    t = np.empty(n)
+    c, v, lo_fence, _ = _fences(x, keep, t)
+    if np.isnan(lo_fence):
+        return np.nan
     tk = t[keep]
     lo, hi = _quantile(tk, trim), _quantile(tk, 1 - trim)
     for d in range(3):
         ends[0, d] = c[d] + lo * v[d]
         ends[1, d] = c[d] + hi * v[d]
     return hi - lo
+
+
+@compiled
+def group_extent_with(x, extra, start, trim, reach, ends):
+    """``body._extent_with`` of one group x (n, 3) float64 mm, finite, and its faint ends ``extra`` (e, 3)
+    (``start`` (e,): the index of each one's walk's first point): the extent, the extreme points into
+    ``ends`` (2, 3) and how many extra points counted; NaN as ``group_extent``."""
+    n = len(x)
+    keep = np.ones(n, np.bool_)
+    t = np.empty(n)
+    c, v, lo_fence, hi_fence = _fences(x, keep, t)
+    if np.isnan(lo_fence):
+        return np.nan, 0
+    tk = t[keep]
+    lo0, hi0 = _quantile(tk, trim), _quantile(tk, 1 - trim)
+    te = np.empty(len(extra))
+    for i in range(len(extra)):
+        te[i] = (extra[i, 0] - c[0]) * v[0] + (extra[i, 1] - c[1]) * v[1] + (extra[i, 2] - c[2]) * v[2]
+    both = np.empty(len(tk) + len(extra))
+    both[:len(tk)] = tk
+    m = len(tk)
+    for i in range(len(extra)):
+        t0 = te[start[i]]
+        if lo_fence <= te[i] <= hi_fence and lo0 - reach <= t0 <= hi0 + reach:
+            both[m] = te[i]
+            m += 1
+    lo, hi = _quantile(both[:m], trim), _quantile(both[:m], 1 - trim)
+    for d in range(3):
+        ends[0, d] = c[d] + lo * v[d]
+        ends[1, d] = c[d] + hi * v[d]
+    return hi - lo, m - len(tk)
 
 
 @compiled

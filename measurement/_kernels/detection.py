@@ -41,7 +41,7 @@ def first_peaks(mask, s):
 
 
 @compiled
-def refine_peaks(s, bg, at, half, row0):
+def refine_peaks(s, bg, at, half, row0, strong=np.inf):
     """The peaks at flat indices ``at`` (K,) (raster order) of s (h, w) uint8 over the background bg (h, w)
     uint8 (bg <= s), one per peak: x, y (P,) int64 pixels (y counted from ``row0``); u (P,) float64, the
     centroid column of the run of pixels through the peak above half its height (twice the height above
@@ -49,7 +49,12 @@ def refine_peaks(s, bg, at, half, row0):
     end pixel repeated past the border; that run's width (P,) float32; the flank (P,) float32, the peak's
     height above the higher of its side minima (within half - 1 pixels each side); the contrast s - bg
     (P,) float32. A peak whose centroid lies less than half a pixel right of the previous one's in its row
-    is the other half of a flat top cut by a one-level dip (the same centroid): it is left out."""
+    is the other half of a flat top cut by a one-level dip (the same centroid): it is left out.
+
+    ``strong`` : a contrast above which a peak is a centre, the others faint (``detection.faint``). The
+    strong peaks are then weighed against each other only, so they come out as they do when the faint ones
+    are not listed at all (``at`` without them); a faint peak is left out as the other half of a strong
+    one's flat top, before it or after it. With the default every peak is weighed against every other."""
     w = s.shape[1]
     n = len(at)
     x_out, y_out = np.empty(n, np.int64), np.empty(n, np.int64)
@@ -59,7 +64,8 @@ def refine_peaks(s, bg, at, half, row0):
     contrast = np.empty(n, np.float32)
     pad = np.empty(2 * half + 1, np.uint8)
     p = 0
-    last_y, last_u = -1, 0.0
+    last_y, last_u = -1, 0.0  # the previous peak (strong ones: the previous strong peak)
+    any_y, any_u = -1, 0.0  # the previous peak of either kind
     for i in range(n):
         y = at[i] // w
         x = at[i] - y * w
@@ -71,17 +77,26 @@ def refine_peaks(s, bg, at, half, row0):
         peak, back = np.int64(raw[half]), np.int64(bg[y, x])
         num, den, run = _run_moments(raw, half, back + peak)
         ui = x + num / max(den, 1)
-        repeat = y == last_y and ui - last_u < 0.5
-        last_y, last_u = y, ui
+        is_strong = peak - back > strong
+        if is_strong or strong == np.inf:
+            repeat = y == last_y and ui - last_u < 0.5
+            last_y, last_u = y, ui
+        else:
+            repeat = y == any_y and ui - any_u < 0.5
+        any_y, any_u = y, ui
         if repeat:
             continue
+        # a strong peak takes the place of a faint first half of its flat top
+        at_p = p
+        if is_strong and p > 0 and y_out[p - 1] == y + row0 and contrast[p - 1] <= strong and ui - u[p - 1] < 0.5:
+            at_p = p - 1
         left, right = peak, peak
         for k in range(1, half):
             left = min(left, np.int64(raw[k]))
             right = min(right, np.int64(raw[half + k]))
-        x_out[p], y_out[p], u[p], width[p] = x, y + row0, ui, run
-        flank[p], contrast[p] = peak - max(left, right), peak - back
-        p += 1
+        x_out[at_p], y_out[at_p], u[at_p], width[at_p] = x, y + row0, ui, run
+        flank[at_p], contrast[at_p] = peak - max(left, right), peak - back
+        p = at_p + 1
     return x_out[:p], y_out[:p], u[:p], width[:p], flank[:p], contrast[:p]
 
 

@@ -320,3 +320,69 @@ def row_order_breaks(order, v, labels):
             drop[prev] = True
         prev = i
     return drop
+
+
+@compiled
+def walk_ends(pool_key, pool_u, pool_v, pool_lab, span, u, v, slope, step, lab, link, rows, gaps):
+    """``ends.faint_ends``' walks, all in step: each walk (W,) at column u, row v, with the stripe's
+    slope du/dv, moving ``step`` (+-1) rows at a time, label ``lab``, steps to the nearest peak of the
+    pool (sorted by ``pool_key`` = v * span + u) in the next row (or up to ``gaps`` rows on) within
+    ``link`` of u + slope * the rows moved, not taken before and labelled -1 or ``lab``; two walks
+    reaching the same peak both stop there (and it is taken). Up to ``rows`` steps. Returns the peaks'
+    columns, rows, labels and walks (E,), step by step, each step's walks ascending."""
+    n_w = len(u)
+    u = u.copy()
+    v = v.copy()
+    slope = slope.copy()
+    taken = np.zeros(len(pool_key), np.bool_)
+    claim = np.full(len(pool_key), -1, np.int64)  # in a step: the walk that reached a peak (-2: two did)
+    active = np.ones(n_w, np.bool_)
+    best = np.full(n_w, -1, np.int64)
+    out_u = np.empty(n_w * rows)
+    out_v = np.empty(n_w * rows, np.int64)
+    out_k = np.empty(n_w * rows, np.int64)
+    out_w = np.empty(n_w * rows, np.int64)
+    e = 0
+    for _ in range(rows):
+        moving = 0
+        for w in range(n_w):
+            best[w] = -1
+            if not active[w]:
+                continue
+            for gap in range(1, gaps + 1):
+                want_u = u[w] + slope[w] * step[w] * gap
+                key = (v[w] + step[w] * gap) * span + want_u
+                lo = np.searchsorted(pool_key, key - link)
+                hi = np.searchsorted(pool_key, key + link, side="right")
+                best_d = np.inf
+                for j in range(lo, hi):
+                    if taken[j] or (pool_lab[j] >= 0 and pool_lab[j] != lab[w]):
+                        continue
+                    d = abs(pool_u[j] - want_u)
+                    if d < best_d:
+                        best_d = d
+                        best[w] = j
+                if best[w] >= 0:
+                    break
+            if best[w] >= 0:
+                claim[best[w]] = w if claim[best[w]] == -1 else -2
+                moving += 1
+        if moving == 0:
+            break
+        for w in range(n_w):
+            if not active[w]:
+                continue
+            j = best[w]
+            if j < 0 or claim[j] == -2:
+                active[w] = False
+                continue
+            moved = pool_v[j] - v[w]
+            slope[w] = 0.5 * slope[w] + 0.5 * (pool_u[j] - u[w]) / moved
+            u[w], v[w] = pool_u[j], pool_v[j]
+            out_u[e], out_v[e], out_k[e], out_w[e] = u[w], v[w], lab[w], w
+            e += 1
+        for w in range(n_w):
+            if best[w] >= 0:
+                taken[best[w]] = True
+                claim[best[w]] = -1
+    return out_u[:e], out_v[:e], out_k[:e], out_w[:e]
