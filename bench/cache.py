@@ -7,10 +7,13 @@ The other benches render their views into the cache (``/tmp/bodyscan-bench`` by 
 scans each of them with the checkout's code (the five-seed bench's, the robustness benches' at both sizes:
 about 230 views in under a minute) and writes per view the animal's true crossings, how many of its centres
 were labelled and how many of those right, the background's, the body length and height, and the count of
-wrong labels by their distance from the truth. ``compare`` prints the totals of two dumps over the views
-both hold (views with at least half the animal labelled and 95 % of that right; animal centres right and
-wrong; background centres wrong; the wrong labels of the views placed in the first dump by their shift from
-the truth) and every view whose animal labels or length moved. To compare two versions, dump with each
+wrong labels by their distance from the truth, and the same length and height definitions applied to the
+true stripe points. ``compare`` prints the totals of two dumps over the views both hold (views with at
+least half the animal labelled and 95 % of that right; animal centres right and wrong; background centres
+wrong; the wrong labels of the views placed in the first dump by their shift from the truth; over those
+views, how many lengths and heights lie within 1 % of the truth's, their mean error and how many lie over
+it by more than 1 and 2 %) and every view whose animal labels or length moved. A dump without the truth's
+figures (made before they were added) is compared with the other dump's. To compare two versions, dump with each
 checkout's own copy (it imports the checkout it lies in: ``python ../other/bench/cache.py dump B.json``).
 """
 
@@ -27,6 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.common import ANIMAL  # noqa: E402
+from measurement.body import measure  # noqa: E402
 from measurement.calibration import load_calibration  # noqa: E402
 from measurement.errors import MeasurementError  # noqa: E402
 from measurement.images import read_image  # noqa: E402
@@ -45,12 +49,15 @@ def score_view(cap: Path, view: str) -> dict:
     an, bg = kind == ANIMAL, (kind == 2) | (kind == 3)
     wrong = an & (r.scene_stripe != tk) & (tk >= 0)
     diffs, counts = np.unique(r.scene_stripe[wrong] - tk[wrong], return_counts=True)
+    on = t["kind"] == ANIMAL
+    ref = measure(t["points"][on], t["stripe"][on], np.rint(t["uv"][on, 1]).astype(np.int64), view) if on.any() else {}
     return {
         "truth": int((t["kind"] == ANIMAL).sum()),
         "animal_labelled": int(an.sum()), "animal_right": int((r.scene_stripe[an] == tk[an]).sum()),
         "bg": int(bg.sum()), "bg_right": int((r.scene_stripe[bg] == tk[bg]).sum()),
         "length": r.measurements.get("body_length_mm"), "height": r.measurements.get("body_height_mm"),
         "points": int(len(r.points)), "wrong_by_shift": {int(d): int(n) for d, n in zip(diffs, counts, strict=True)},
+        "length_truth": ref.get("body_length_mm"), "height_truth": ref.get("body_height_mm"),
     }
 
 
@@ -102,10 +109,31 @@ def compare(before: Path, after: Path, view: str | None) -> None:
         top = sorted(shifts.items(), key=lambda kv: -max(kv[1]))[:8]
         print("  wrong labels in the views placed before, by label - truth: "
               + ", ".join(f"{s:+d}: {x} -> {y}" for s, (x, y) in top))
+    for name in ("length", "height"):
+        print(_accuracy(name, [k for k in keys if placed(a[k])], a, b))
     for k in keys:
         va, vb = a[k], b[k]
         if any(va.get(f) != vb.get(f) for f in ("error", "animal_labelled", "animal_right", "length")):
             print(f"  {k}: {_shown(va)} -> {_shown(vb)}")
+
+
+def _accuracy(name: str, keys: list[str], a: dict, b: dict) -> str:
+    """One line: over ``keys``, the ``name`` (length or height) of dumps a and b against the truth's."""
+    errs: list[list[float]] = [[], []]
+    for k in keys:
+        truth = b[k].get(f"{name}_truth") or a[k].get(f"{name}_truth")
+        got = [d[k].get(name) for d in (a, b)]
+        if truth and all(g is not None for g in got):
+            for j in (0, 1):
+                errs[j].append(got[j] / truth - 1)
+    if not errs[0]:
+        return f"  {name}: no truth figures in either dump"
+    e = [np.array(x) for x in errs]
+    parts = [f"within 1 % {int(np.sum(np.abs(e[0]) <= 0.01))} -> {int(np.sum(np.abs(e[1]) <= 0.01))}",
+             f"mean |error| {np.mean(np.abs(e[0])):.2%} -> {np.mean(np.abs(e[1])):.2%}",
+             f"over +1 % {int(np.sum(e[0] > 0.01))} -> {int(np.sum(e[1] > 0.01))}",
+             f"over +2 % {int(np.sum(e[0] > 0.02))} -> {int(np.sum(e[1] > 0.02))}"]
+    return f"  {name}s of the {len(e[0])} views placed before, against the truth's: " + ", ".join(parts)
 
 
 def main() -> None:
