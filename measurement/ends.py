@@ -19,9 +19,9 @@ from .detection import Centres
 from .segments import runs, segment_rows
 from .triangulation import intersect, rays_at
 
-MAX_ROWS = 24  # rows (at a 2048-row image) a stripe is followed past its last confident centre
+MAX_ROWS = 36  # rows (at a 2048-row image) a stripe is followed past its last confident centre
 SLOPE_ROWS = 6  # rows over which a segment's end slope is taken
-ROW_GAP = 2  # a step may skip one row without a peak
+ROW_GAP = 3  # a step may skip up to two rows without a peak (dark fur cuts a faint stripe)
 MERGE_ROWS = 3  # rows (at a 2048-row image) a stripe's end is followed along a floor or wall stripe
 OTHER_STRIPE_MM = 1.5  # a peak some other light plane puts this close to the floor or wall is that stripe's
 
@@ -39,7 +39,7 @@ def faint_ends(c: Centres, labels: np.ndarray, segment: np.ndarray, cloud: np.nd
     faint : the faint peaks of the same image
     link_px : largest column change per row from the stripe's course (its slope over the last rows)
 
-    A step goes to the nearest peak in the next row (or the one after) within ``link_px`` of where the
+    A step goes to the nearest peak in the next row (or up to ``ROW_GAP`` on) within ``link_px`` of where the
     stripe's course leads: a faint peak or a centre with no label or with the walk's own, never one a
     labelled point of the scene holds (that stripe is another's). Two walks reaching the same peak both
     stop there."""
