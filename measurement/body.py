@@ -177,27 +177,25 @@ def _with_ends(grouped: np.ndarray, first: np.ndarray, last: np.ndarray, ks: np.
             e, n = _kernels.group_extent_with(x, np.ascontiguousarray(extra, np.float64), start, trim,
                                               ENDS_STEP_MM, all_ends[g])
         if np.isnan(e):
-            e, all_ends[g], n = _extent_with(x, extra, walk, trim)
+            e, all_ends[g], n = _extent_with(x, extra, start, trim)
         exts[g] = e
         used += int(n)
     return used
 
 
-def _extent_with(points: np.ndarray, extra: np.ndarray, walk: np.ndarray, trim: float
+def _extent_with(points: np.ndarray, extra: np.ndarray, start: np.ndarray, trim: float
                  ) -> tuple[float, np.ndarray, int]:
     """``_extent`` of points (K, 3) with the ``extra`` points (E, 3) that fall within its fences: the
     group's direction and fences are its own points' (extra points extend its extremes, they cannot change
-    which part of a stripe counts). ``walk`` (E,): the walk each extra point came from, in order; a walk
-    counts only if its first point lies within ``ENDS_STEP_MM`` of the group's own trimmed extremes (the end
-    of a stray bit of stripe past them, a few points the trim left out, extends nothing). Returns the
-    extent, the two extreme points (2, 3) and how many extra points were read."""
+    which part of a stripe counts). ``start`` (E,): the index in ``extra`` of the first point of the walk
+    each came from; a walk counts only if its first point lies within ``ENDS_STEP_MM`` of the group's own
+    trimmed extremes (the end of a stray bit of stripe past them, a few points the trim left out, extends
+    nothing). Returns the extent, the two extreme points (2, 3) and how many extra points were read."""
     c, axis, t, keep, lo_f, hi_f = _fenced(points)
     lo0, hi0 = _quantiles(t[keep], (trim, 1 - trim))
     te = (extra - c) @ axis
-    walks, start = np.unique(walk, return_index=True)
     t0 = te[start]
-    starts_inside = (t0 >= lo0 - ENDS_STEP_MM) & (t0 <= hi0 + ENDS_STEP_MM)
-    inside = (te >= lo_f) & (te <= hi_f) & starts_inside[np.searchsorted(walks, walk)]
+    inside = (te >= lo_f) & (te <= hi_f) & (t0 >= lo0 - ENDS_STEP_MM) & (t0 <= hi0 + ENDS_STEP_MM)
     lo, hi = _quantiles(np.r_[t[keep], te[inside]], (trim, 1 - trim))
     return float(hi - lo), np.array([c + lo * axis, c + hi * axis]), int(inside.sum())
 

@@ -690,13 +690,13 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
         seg, minlength=seg.max() + 1)
     order = segment_rows(seg, c.v)
     s_sorted = seg[order]
-    runs = np.r_[0, np.flatnonzero(s_sorted[1:] != s_sorted[:-1]) + 1, len(seg)]  # a segment each, top down
-    sids = s_sorted[runs[:-1]]
+    bounds = runs(s_sorted)  # a segment each, top down
+    sids = s_sorted[bounds[:-1]]
     sid_run = np.full(seg.max() + 1, -1)
     sid_run[sids] = np.arange(len(sids))  # each segment's run in ``order``
     first = np.full(seg.max() + 1, -1)
     last = np.full(seg.max() + 1, -1)
-    first[sids], last[sids] = order[runs[:-1]], order[runs[1:] - 1]
+    first[sids], last[sids] = order[bounds[:-1]], order[bounds[1:] - 1]
     in_mask = np.zeros(seg.max() + 1, bool)
     in_mask[seg[mask]] = True
     is_animal = np.zeros(seg.max() + 1, bool)
@@ -730,7 +730,7 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
                     near = np.abs(depth_on(rays.take(a[ai], axis=0), planes.take(k, axis=0))
                                   - depth_on(rays.take(b[bi], axis=0), planes.take(k, axis=0))) < tol_mm
                     for sid, lab in zip(dst[bi][near].tolist(), k[near].tolist(), strict=True):
-                        if sid not in done and _lit_share(rays, planes, order[runs[sid_run[sid]]:runs[sid_run[sid] + 1]],
+                        if sid not in done and _lit_share(rays, planes, order[bounds[sid_run[sid]]:bounds[sid_run[sid] + 1]],
                                                           lab, lit) <= 0.25:
                             done[sid] = lab
         if not done:

@@ -14,7 +14,7 @@ import numpy as np
 
 from .body import BodyParams, isolate, measure
 from .calibration import Calibration
-from .detection import DetectionParams, check_image, detect_centres_and_faint, reliable
+from .detection import DetectionParams, check_image, detect_centres, detect_centres_and_faint, reliable
 from .ends import MERGE_ROWS, end_points, faint_ends
 from .errors import ImageError, ScanError
 from .matching import Labels, MatchingParams, denoise, label_centres, smooth_along_segments
@@ -102,7 +102,10 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     size = calibration.intrinsics.image_size
     check_image(image, (size[1], size[0]) if calibration.transposed else size)
     t = {"start": time.perf_counter()}
-    centres, faint = detect_centres_and_faint(image, params.detection, ambient)
+    if params.faint_ends:
+        centres, faint = detect_centres_and_faint(image, params.detection, ambient)
+    else:  # the faint peaks are for the ends only
+        centres, faint = detect_centres(image, params.detection, ambient), None
     t["detect"] = time.perf_counter()
     if len(centres) and params.matching.denoise:
         centres = centres.take(denoise(centres, image.shape[:2]))
@@ -143,7 +146,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     animal = isolate(pts, labels.background, params.body)
     animal_pts, animal_stripe = pts[animal], stripe[animal]
     ends = None
-    if params.faint_ends and len(animal_pts):
+    if faint is not None and len(animal_pts):
         eu, ev, ek, ew = faint_ends(centres, labels.stripe, seg_ids, idx[animal], idx, faint,
                                     params.matching.link_px * max(image.shape[1] / 3072.0, 0.5), image.shape[0])
         if len(eu):

@@ -328,10 +328,10 @@ def test_compiled_extents_with_faint_ends_equal_the_numpy_ones():
                 continue
             extra = x[rng.integers(0, len(x), 30)] * rng.uniform(0.9, 1.4) + rng.normal(size=(30, 3))
             walk = np.sort(rng.integers(0, 4, 30))
-            want, want_ends, want_n = _extent_with(x, extra, walk, 0.01)
             walks, first = np.unique(walk, return_index=True)
+            start = first[np.searchsorted(walks, walk)]
+            want, want_ends, want_n = _extent_with(x, extra, start, 0.01)
             ends = np.zeros((2, 3))
-            got, n = _kernels.group_extent_with(x, extra, first[np.searchsorted(walks, walk)], 0.01, ENDS_STEP_MM,
-                                                ends)
+            got, n = _kernels.group_extent_with(x, extra, start, 0.01, ENDS_STEP_MM, ends)
             assert abs(got - want) <= 1e-9 * max(abs(want), 1.0) and n == want_n
             assert np.allclose(ends, want_ends, rtol=1e-12, atol=1e-9)
