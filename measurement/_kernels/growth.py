@@ -88,27 +88,53 @@ def grow_by_depth(rays, planes, table, cols, tol_mm, n, gaps, penalty_mm, min_sh
     by_nb = group_members(cols[4], len(table))
     by_own = group_members(cols[3], len(table))
     return _grow_rounds(rays, planes, table, cols, by_nb, by_own, np.flatnonzero(table >= 0), tol_mm, n, gaps,
-                        penalty_mm, min_share, rounds)
+                        penalty_mm, min_share, rounds, 0.0)
 
 
 @compiled
-def _grow_rounds(rays, planes, table, cols, by_nb, by_own, newly, tol_mm, n, gaps, penalty_mm, min_share, rounds):
+def _grow_rounds(rays, planes, table, cols, by_nb, by_own, newly, tol_mm, n, gaps, penalty_mm, min_share, rounds,
+                 cover):
     """``grow_by_depth``'s rounds with the pairs grouped (``pair_groups``), from the segments ``newly`` (G,)
-    labelled last; updates ``table`` and returns the segments and labels that joined, in that order."""
+    labelled last; updates ``table`` and returns the segments and labels that joined, in that order.
+
+    With ``cover`` > 0 the best-supported join first: of a round's majorities only the segments with votes
+    cast (a labelled neighbour) for at least ``cover`` of their pairs whose neighbour may still take part
+    (-1 or labelled) join, unless none has (then all do); the others wait, and are voted on again in each
+    later round, as their other neighbours join."""
     out_seg = np.empty(len(table), np.int64)
     out_lab = np.empty(len(table), np.int64)
     m = 0
     no_step = np.zeros(0)
+    pending = np.zeros(0, np.int64)
+    own_starts, own_pairs = by_own
     for _ in range(rounds):
         # only segments beside a newly labelled one can vote differently from the round before
         at = _voters(cols, table, newly, by_nb, by_own)
+        if cover > 0 and len(pending):
+            at = np.unique(np.concatenate((at, _pairs_of(cols, table, pending, by_own))))
         if len(at) == 0:
             break
         best = depth_votes(rays, planes, table, cols, at, gaps, tol_mm, n, penalty_mm, no_step)
         segs, labs = majority(cols[3][at], best, n, min_share)
         if len(segs) == 0:
             break
+        if cover > 0:
+            keep = np.zeros(len(segs), np.bool_)
+            for g in range(len(segs)):
+                vot, pot = 0, 0
+                for j in range(own_starts[segs[g]], own_starts[segs[g] + 1]):
+                    t = table[cols[4, own_pairs[j]]]
+                    if t >= 0:
+                        vot += 1
+                    if t >= -1:
+                        pot += 1
+                keep[g] = vot >= cover * pot
+            if keep.any():
+                pending = np.unique(np.concatenate((pending, segs[~keep])))
+                segs, labs = segs[keep], labs[keep]
         m = _join(table, segs, labs, out_seg, out_lab, m)
+        if cover > 0 and len(pending):
+            pending = pending[table[pending] == -1]
         newly = segs
     return out_seg[:m], out_lab[:m]
 
@@ -428,15 +454,16 @@ def _pairs_of(cols, table, segs, by_own):
 
 @compiled
 def grow_piece(rays, planes, cols, by_nb, by_own, state, seed, mid, tol_mm, n, gaps, penalty_mm, min_share,
-               rounds, refine_gaps, refine_share, refine_rounds):
-    """``matching._pieces``' trial for one seed: growth by depth continuity (``grow_by_depth``) from
-    segment ``seed`` at label ``mid`` over the segments that ``state`` (S,) marks -1 (the others, -2, take
-    no part), then up to ``refine_rounds`` re-votes of its members by the same continuity. Returns the
-    trial's segments (G,) (the seed, then in the order they joined) and their labels (G,)."""
+               rounds, refine_gaps, refine_share, refine_rounds, cover=0.0):
+    """``matching._pieces``' trial for one seed: growth by depth continuity (``grow_by_depth``, best-supported
+    first with ``cover``: ``_grow_rounds``) from segment ``seed`` at label ``mid`` over the segments that
+    ``state`` (S,) marks -1 (the others, -2, take no part), then up to ``refine_rounds`` re-votes of its
+    members by the same continuity. Returns the trial's segments (G,) (the seed, then in the order they
+    joined) and their labels (G,)."""
     table = state.copy()
     table[seed] = mid
     joined, _ = _grow_rounds(rays, planes, table, cols, by_nb, by_own, np.array([seed]), tol_mm, n, gaps,
-                             penalty_mm, min_share, rounds)
+                             penalty_mm, min_share, rounds, cover)
     no_step = np.zeros(0)
     trial = np.concatenate((np.array([seed]), joined))
     m = len(trial)
