@@ -82,7 +82,8 @@ ANCHOR_SHARE = 0.8  # share of a small piece's labelled centres that must agree 
 # ones 11 -> 13, views with 99.5 % of the cloud within 2 mm 5 -> 9; the 272 cached views: placed 201 -> 207
 # (seven gained: four side views at 1536 and 3072 px, the fox's 3072 px fur side view, both sparse-fan top
 # views; lost: a 1536 px bright-room top view, placed before only by the whole-animal recheck's +2; the
-# 1536 px bunny side view fell from 92 to 2 %: both first pieces now read one stripe low), 27 649 more
+# 1536 px bunny side view fell from 92 to 2 % and a 3072 px side view from 800 mm farther, under half
+# labelled, from 99 to 0 %: their first pieces now read one stripe low), 27 649 more
 # animal centres right, 12 462 fewer wrong, 2733 more background centres wrong. 0.4 / 0.6 / 0.7: 207 / 201
 # / 201 views placed, wrong animal centres +15 911 / -3222 / -5633.
 GROWTH_COVER = 0.5
