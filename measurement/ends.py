@@ -27,7 +27,7 @@ OTHER_STRIPE_MM = 1.5  # a peak some other light plane puts this close to the fl
 
 
 def faint_ends(c: Centres, labels: np.ndarray, segment: np.ndarray, cloud: np.ndarray, scene: np.ndarray,
-               faint: Centres, link_px: float, image_rows: int
+               faint: Centres, link_px: float, image_rows: int, over_background: bool = False
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The rows past each animal segment's ends that its stripe still crosses: u (E,) float64 and v (E,)
     int64 pixels and the stripe index (E,) of each, and the walk (E,) int64 it came from (its points in
@@ -38,18 +38,22 @@ def faint_ends(c: Centres, labels: np.ndarray, segment: np.ndarray, cloud: np.nd
     scene : indices into c of every point of the scene (the animal's among them): none is stepped on
     faint : the faint peaks of the same image
     link_px : largest column change per row from the stripe's course (its slope over the last rows)
+    over_background : the scene's points off the animal (the floor's and wall's) may be stepped on too
 
     A step goes to the nearest peak in the next row (or up to ``ROW_GAP`` on) within ``link_px`` of where the
     stripe's course leads: a faint peak or a centre with no label or with the walk's own, never one a
-    labelled point of the scene holds (that stripe is another's). Two walks reaching the same peak both
-    stop there."""
+    labelled point of the scene holds (that stripe is another's), but with ``over_background`` the
+    floor's and wall's: seen from above, where the animal's stripe ends at the flank it merges with the
+    floor's stripe four or five over (the depth alias), and labelling gives the merged rows to the floor's
+    segment; the walk would stop one to five rows short of the stripe's end (``end_points`` stops it three
+    rows into such a merge). Two walks reaching the same peak both stop there."""
     none = (np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64))
     if len(cloud) == 0:
         return none
     in_scene = np.zeros(len(c), bool)
-    in_scene[scene] = True
-    # what a walk may step on: with the faint peaks, the centres outside the scene's points, within reach
-    # of the animal's rows and columns
+    in_scene[cloud if over_background else scene] = True
+    # what a walk may step on: with the faint peaks, the centres outside the scene's points (the animal's,
+    # with ``over_background``), within reach of the animal's rows and columns
     reach = max(1, int(round(MAX_ROWS * image_rows / 2048.0))) + ROW_GAP
     v_lo, v_hi = int(c.v[cloud].min()) - reach, int(c.v[cloud].max()) + reach
     u_lo, u_hi = float(c.u[cloud].min()) - 4 * reach, float(c.u[cloud].max()) + 4 * reach
@@ -58,7 +62,12 @@ def faint_ends(c: Centres, labels: np.ndarray, segment: np.ndarray, cloud: np.nd
     faint = faint.take(near)
     pool_u = np.r_[c.u[free], faint.u]
     pool_v = np.r_[c.v[free].astype(np.int64), faint.v.astype(np.int64)]
-    pool_lab = np.r_[labels[free], np.full(len(faint), -1, np.int64)]
+    free_lab = labels[free]
+    if over_background:  # the floor's and wall's points are stepped on as unlabelled
+        on_scene = np.zeros(len(c), bool)
+        on_scene[scene] = True
+        free_lab = np.where(on_scene[free], -1, free_lab)
+    pool_lab = np.r_[free_lab, np.full(len(faint), -1, np.int64)]
     span = 4.0 * (max(float(pool_u.max(initial=0.0)), float(c.u.max())) + link_px + 2.0)
     pool_key = pool_v * span + pool_u
     order = np.argsort(pool_key, kind="stable")

@@ -148,7 +148,8 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     ends = None
     if faint is not None and len(animal_pts):
         eu, ev, ek, ew = faint_ends(centres, labels.stripe, seg_ids, idx[animal], idx, faint,
-                                    params.matching.link_px * max(image.shape[1] / 3072.0, 0.5), image.shape[0])
+                                    params.matching.link_px * max(image.shape[1] / 3072.0, 0.5), image.shape[0],
+                                    over_background=view == "top")
         if len(eu):
             ep, keep = end_points(eu, ev, ek, ew, table, calibration.planes, labels.background,
                                   params.body.background_mm, max(1, round(MERGE_ROWS * image.shape[0] / 2048)))
