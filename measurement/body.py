@@ -57,7 +57,16 @@ def isolate(points: np.ndarray, background: np.ndarray | None, params: BodyParam
     """(N,) bool mask of the animal: off the background planes (by ``background_margin``), then the
     largest cluster of points connected through occupied voxels of ``cluster_mm`` (26-neighbourhood) that
     is not a box (``planar_share``)."""
+    return isolate_with_margin(points, background, params)[0]
+
+
+def isolate_with_margin(points: np.ndarray, background: np.ndarray | None, params: BodyParams = BodyParams()
+                        ) -> tuple[np.ndarray, float]:
+    """``isolate``'s mask (N,) and the distance (mm) from the background planes under which it took a point
+    for background (``background_margin``; 0 without planes)."""
     from scipy import ndimage
+
+    margin = 0.0
 
     if background is not None and len(background) and points.dtype == background.dtype == np.float64:
         # in one compiled pass: finite points, each point's least |n . p - d| over the planes and those
@@ -65,21 +74,23 @@ def isolate(points: np.ndarray, background: np.ndarray | None, params: BodyParam
         keep, d = np.empty(len(points), bool), np.empty(len(points))
         near = _kernels.plane_distances(points, _plane_products(points, background[:, :3].T),
                                         np.ascontiguousarray(background[:, 3]), params.background_mm, keep, d)
-        keep &= d > background_margin(near, params)
+        margin = background_margin(near, params)
+        keep &= d > margin
     else:
         keep = np.isfinite(points[:, 0]) & np.isfinite(points[:, 1]) & np.isfinite(points[:, 2])
         if background is not None and len(background):
             d = np.abs(_plane_products(points, background[:, :3].T) - background[:, 3])
             d = np.minimum.reduce(list(d.T)) if d.shape[1] > 1 else d[:, 0]  # faster than min(axis=1) over 2
-            keep &= d > background_margin(d[keep], params)
+            margin = background_margin(d[keep], params)
+            keep &= d > margin
     idx = np.nonzero(keep)[0]
     if len(idx) < params.min_group:
-        return np.zeros(len(points), bool)
+        return np.zeros(len(points), bool), margin
     cells, shape = _voxel_cells(points, idx, params.cluster_mm)
     if np.prod(shape) > 60_000_000:  # absurdly spread cloud: fall back to one cluster
         out = np.zeros(len(points), bool)
         out[idx] = True
-        return out
+        return out, margin
     grid = np.zeros(int(np.prod(shape)), bool)
     grid[cells] = True
     labels, _ = ndimage.label(grid.reshape(shape), structure=np.ones((3, 3, 3), bool))
@@ -94,7 +105,33 @@ def isolate(points: np.ndarray, background: np.ndarray | None, params: BodyParam
             biggest = max(curved, key=lambda k: (sizes[k], -k))
     out = np.zeros(len(points), bool)
     out[idx[lab == biggest]] = True
-    return out
+    return out, margin
+
+
+def beside(animal: np.ndarray, points: np.ndarray, background: np.ndarray | None, margin_mm: float,
+           voxel_mm: float) -> np.ndarray:
+    """(K,) bool: which of ``points`` (K, 3) mm ``isolate`` would have taken with the ``animal`` (N, 3) mm:
+    finite, more than ``margin_mm`` off every background plane (P, 4), and in a voxel of ``voxel_mm`` that
+    is one of the animal's or touches one (26-neighbourhood)."""
+    out = np.isfinite(points).all(axis=1)
+    if len(points) == 0 or len(animal) == 0:
+        return out & False
+    if background is not None and len(background):
+        out &= np.abs(points @ background[:, :3].T - background[:, 3]).min(axis=1) > margin_mm
+    origin = animal.min(axis=0) - voxel_mm
+    cells = np.floor((animal - origin) / voxel_mm).astype(np.int64)
+    dims = cells.max(axis=0) + 3  # one spare cell on each side
+    occupied = np.unique((cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2])
+    at = np.floor((np.nan_to_num(points) - origin) / voxel_mm).astype(np.int64)
+    near = np.zeros(len(points), bool)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            for dk in (-1, 0, 1):
+                q = at + (di, dj, dk)
+                inside = ((q >= 0) & (q < dims)).all(axis=1)
+                key = (q[:, 0] * dims[1] + q[:, 1]) * dims[2] + q[:, 2]
+                near |= inside & np.isin(key, occupied)
+    return out & near
 
 
 def planar_share(points: np.ndarray, planes: int = 3, tol_mm: float = 2.0, most: int = 3000) -> float:
@@ -258,14 +295,22 @@ def _quantiles(x: np.ndarray, qs: tuple[float, ...]) -> list[float]:
 
 
 def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
-            params: BodyParams = BodyParams(), ends: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
-            ) -> dict:
+            params: BodyParams = BodyParams(), ends: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+            wide: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> dict:
     """Automatic measurements of an isolated animal cloud.
 
     points (N, 3) mm, stripe (N,) index, rows (N,) image row of each point.
     ends : points (E, 3) mm, stripe indices (E,) and walks (E,) of the stripes' faint ends (``ends``): the
            per-stripe extents (height, or width from above) read them with the group's points; the groups
-           (at least ``min_group`` points of the cloud) and the length are the cloud's alone.
+           (at least ``min_group`` points of the cloud) and the extents are the cloud's alone.
+    wide : points (W, 3) mm, stripe indices (W,) and rows (W,) of the animal's labelled centres the cloud
+           leaves out (wide or one-sided peaks: ``detection.reliable``). The length reads those of the
+           stripes the cloud holds too few points of to make a group: where a stripe crosses a thin or
+           grazing part (the tail's tip seen from above, a snout from the side) it is detected as wide, dim
+           peaks, and without it the length's first or last group is the next stripe's, 7-9 % short. Their
+           positions are off by 1-3 px, mostly in depth along the stripe's plane, which barely moves a
+           distance between the body's two ends; the groups the cloud makes are left as they are (more rows
+           there would move the length's 10-row rule).
     """
     out: dict = {"view": view, "point_count": int(len(points))}
     ks, counts = _stripe_counts(stripe)
@@ -277,7 +322,16 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
         return out
     # the cross-check and the length need only the points and their rows: beside the extents
     box = second_core().submit(_box, points)
-    length_job = second_core().submit(_length, points, stripe, rows, groups, params.min_group)
+    length_points = (points, stripe, rows, groups)
+    if wide is not None and len(wide[1]):
+        thin = ~np.isin(wide[1], groups)  # only stripes the cloud makes no group of
+        if thin.any():
+            lp = np.concatenate([points, wide[0][thin]])
+            ls, lr = np.concatenate([stripe, wide[1][thin]]), np.concatenate([rows, wide[2][thin]])
+            k2, c2 = _stripe_counts(ls)
+            length_points = (lp, ls, lr, [int(k) for k, n in zip(k2, c2, strict=True) if n >= params.min_group])
+            out["length_wide_groups"] = sorted(set(length_points[3]) - set(groups))
+    length_job = second_core().submit(_length, *length_points, params.min_group)
     # each group's points in their original order (one stable sort instead of a mask per group)
     order = _stable_order(stripe)
     ks_sorted, ks_arr = stripe[order], np.array(groups)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .body import BodyParams, isolate, measure
+from .body import BodyParams, beside, isolate_with_margin, measure
 from .calibration import Calibration
 from .detection import DetectionParams, check_image, detect_centres, detect_centres_and_faint, reliable
 from .ends import MERGE_ROWS, end_points, faint_ends
@@ -122,6 +122,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     t["match"] = time.perf_counter()
     seg_ids = labels.segment if labels.segment is not None else np.arange(len(centres))
     smooth_u, ok = smooth_along_segments(centres, seg_ids, labels.stripe)
+    smoothed = ok.copy()
     # one-sided peaks and stripes widened at a grazing outline helped link and label their stripe, but
     # their position is off by 1.5-5 px: they stay out of the cloud
     ok &= reliable(centres, params.detection)
@@ -143,7 +144,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     uv = np.column_stack([smooth_u.take(idx), rows])
     stripe = labels.stripe.take(idx)
     t["triangulate"] = time.perf_counter()
-    animal = isolate(pts, labels.background, params.body)
+    animal, margin = isolate_with_margin(pts, labels.background, params.body)
     animal_pts, animal_stripe = pts[animal], stripe[animal]
     ends = None
     if faint is not None and len(animal_pts):
@@ -154,7 +155,9 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
             ep, keep = end_points(eu, ev, ek, ew, table, calibration.planes, labels.background,
                                   params.body.background_mm, max(1, round(MERGE_ROWS * image.shape[0] / 2048)))
             ends = (ep[keep], ek[keep], ew[keep])
-    meas = measure(animal_pts, animal_stripe, rows[animal], view, params.body, ends)
+    meas = measure(animal_pts, animal_stripe, rows[animal], view, params.body, ends,
+                   _wide_peaks(centres, smoothed & ~ok, labels, animal_stripe, animal_pts, smooth_u, cells, table,
+                               calibration.planes, margin, params.body))
     t["measure"] = time.perf_counter()
     stages = ["start", "detect", "denoise", "match", "triangulate", "measure"]
     timings = {s: round(1000 * (t[s] - t[p]), 2) for p, s in zip(stages, stages[1:], strict=False)}
@@ -171,6 +174,24 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
                            else frame_edges(uv[animal], image.shape[:2]))
     meas["warnings"] = _warnings(meas, labels)
     return ScanResult(animal_pts, animal_stripe, uv[animal], pts, stripe, uv, meas, timings)
+
+
+def _wide_peaks(centres, unreliable: np.ndarray, labels: Labels, animal_stripe: np.ndarray, animal_pts: np.ndarray,
+                smooth_u: np.ndarray, cells, table, planes: np.ndarray, margin: float, body: BodyParams
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The points (W, 3) mm, stripes (W,) and rows (W,) of the labelled centres flagged ``unreliable`` (M,)
+    that belong to the animal (``body.beside`` its cloud ``animal_pts``), of the stripes the cloud holds
+    fewer than ``min_group`` points of (``measure``'s ``wide``); None where there are none."""
+    if len(animal_pts) == 0:
+        return None
+    counts = np.bincount(animal_stripe, minlength=len(planes))
+    xi = np.flatnonzero(unreliable)
+    xi = xi[counts[labels.stripe[xi]] < body.min_group]
+    if len(xi) == 0:
+        return None
+    xp = cloud_points(smooth_u, centres.u, centres.v, xi, labels.stripe, cells, table, planes)
+    on = beside(animal_pts, xp, labels.background, margin, body.cluster_mm)
+    return xp[on], labels.stripe[xi][on], centres.v[xi][on].astype(np.int64)
 
 
 FRAME_MARGIN = 0.01  # share of the image's width (height) within which an animal point is at its edge

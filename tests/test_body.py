@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 from measurement.body import background_margin, isolate, measure
 
@@ -335,3 +336,42 @@ def test_compiled_extents_with_faint_ends_equal_the_numpy_ones():
             got, n = _kernels.group_extent_with(x, extra, start, 0.01, ENDS_STEP_MM, ends)
             assert abs(got - want) <= 1e-9 * max(abs(want), 1.0) and n == want_n
             assert np.allclose(ends, want_ends, rtol=1e-12, atol=1e-9)
+
+
+def test_the_length_reads_wide_peaks_only_of_stripes_the_cloud_makes_no_group_of():
+    """A stripe over a thin part (a tail's tip) is all wide, dim peaks the cloud leaves out: with only 6 of
+    its 60 rows in the cloud it makes no group, and the length runs from the next stripe in. Its wide peaks
+    make it a group for the length; wide peaks of a stripe that already is one change nothing (more rows
+    there would move the 10-row rule), nor do they change the extents or the groups."""
+    pts, stripe, rows = _barrel()
+    first = stripe == 0
+    kept = ~first | (rows < 6)  # stripe 0 keeps 6 rows in the cloud
+    plain = measure(pts[kept], stripe[kept], rows[kept], "side")
+    assert plain["body_length"]["stripes"] == [1, 19]
+    wide_at = np.flatnonzero(first & (rows >= 6))
+    wide = (pts[wide_at], stripe[wide_at], rows[wide_at])
+    m = measure(pts[kept], stripe[kept], rows[kept], "side", wide=wide)
+    assert m["body_length"]["stripes"] == [0, 19] and m["length_wide_groups"] == [0]
+    assert m["body_length_mm"] == pytest.approx(400.0, abs=0.5) and plain["body_length_mm"] < 390.0
+    assert m["body_height_mm"] == plain["body_height_mm"] and m["stripes_detected"] == plain["stripes_detected"]
+    # wide peaks of a stripe the cloud makes a group of are not read: stripe 1 keeps its upper half, stripe
+    # 19 its lower one, so the two share no row and the length is another pair's; stripe 1's wide peaks in
+    # the lower half would have made them share 30
+    cut = ~first & ~((stripe == 1) & (rows >= 30)) & ~((stripe == 19) & (rows < 30))
+    apart = measure(pts[cut], stripe[cut], rows[cut], "side")
+    assert apart["body_length"]["stripes"] != [1, 19]
+    lower = np.flatnonzero((stripe == 1) & (rows >= 30))
+    again = measure(pts[cut], stripe[cut], rows[cut], "side", wide=(pts[lower], stripe[lower], rows[lower]))
+    assert again["body_length"] == apart["body_length"] and "length_wide_groups" not in again
+
+
+def test_points_beside_the_animal_join_it_and_those_apart_or_on_the_floor_do_not():
+    from measurement.body import beside
+
+    animal = np.column_stack([np.linspace(0, 300, 200), np.zeros(200), np.full(200, 1200.0)])
+    floor = np.array([[0.0, 1.0, 0.0, -150.0]])  # y = -150
+    points = np.array([[310.0, 5.0, 1200.0],     # just past the animal's end: joins
+                       [400.0, 0.0, 1200.0],     # 100 mm away: apart
+                       [150.0, -149.0, 1200.0],  # on the floor
+                       [np.nan, 0.0, 1200.0]])
+    assert beside(animal, points, floor, 3.0, 25.0).tolist() == [True, False, False, False]
