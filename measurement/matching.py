@@ -304,6 +304,12 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     if fg_labels:  # a stripe cut into pieces along its length (a tail tip) keeps its label
         seg_label.update(_continue_along(c, rays, planes, seg, seg_label, fg_mask, set(fg_labels), link,
                                          0.25 * spacing_mm, lit))
+        # a short segment that runs straight on from a long one of the animal takes its index
+        fixed = _agree_along(c, rays, planes, seg, seg_label, set(seg_label) - set(bg_labels), 0.25 * spacing_mm)
+        if fixed:
+            seg_label.update(fixed)
+            seg_label.update(_continue_along(c, rays, planes, seg, seg_label, fg_mask,
+                                             set(seg_label) - set(bg_labels), link, 0.25 * spacing_mm, lit))
     if fg_labels and small:  # isolated small pieces (a head seen from above) hemmed in by what is placed
         seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit, table,
                                       anchor=from_above))
@@ -755,6 +761,58 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
         out.update(done)
         table[np.fromiter(done, np.int64, len(done))] = np.fromiter(done.values(), np.int64, len(done))
         is_animal[np.fromiter(done, np.int64, len(done))] = True
+    return out
+
+
+AGREE_PX = 1.0  # a segment that starts this close (columns) to where another ended, in the next row, goes on with it
+AGREE_SHORT = 30  # segments under this many centres take the index of the one they go on from
+
+
+def _agree_along(c, rays, planes, seg, seg_label, animal: set, tol_mm) -> dict[int, int]:
+    """New labels for short labelled segments (under ``AGREE_SHORT`` centres) that go straight on from a
+    long segment of the ``animal`` (the next row, within ``AGREE_PX`` columns, at least twice as long and
+    ``AGREE_SHORT`` long, and within ``tol_mm`` in depth on its light plane) but carry another index: they
+    take its. A stripe does not change its index between two rows without a jump.
+
+    Linking cuts a stripe where its row neighbours change (against mislinks at depth steps); the short
+    pieces cut off the lower leg near the floor were then labelled from their neighbours, a stripe off,
+    or grown into the floor's labels (a gamma-encoded render's 40-stripe fur side view: stripe 13's last 40
+    rows, the height −8.1 %; −2.2 % with this). On the 272 cached views: 1396 more of the animal's centres
+    right, 405 fewer wrong, 291 more background centres wrong, no view's placement moved, heights within
+    1 % 76 → 77; the five seeds' heights 23 → 24 of 40 (a 50-stripe clean side view +1.17 → +0.10 %)."""
+    if len(seg_label) < 2 or not animal:
+        return {}
+    labelled = np.zeros(seg.max() + 1, bool)
+    labelled[np.fromiter(seg_label, np.int64, len(seg_label))] = True
+    fg = np.zeros(seg.max() + 1, bool)
+    fg[np.fromiter(animal, np.int64, len(animal))] = True
+    member = np.flatnonzero(labelled[seg])
+    order = member[segment_rows(seg[member], c.v[member])]
+    b = runs(seg[order])
+    sids = seg[order[b[:-1]]]
+    first, last = order[b[:-1]], order[b[1:] - 1]
+    size = np.diff(b)
+    table = label_table(seg, seg_label)
+    # pairs (a, b) of segments where b starts the row after a ends, within AGREE_PX columns
+    span = 4.0 * (float(c.u.max()) + 2.0)
+    key_first = c.v[first] * span + c.u[first]
+    srt = np.argsort(key_first)
+    keys = key_first[srt]
+    want = (c.v[last] + 1) * span + c.u[last]
+    lo = np.searchsorted(keys, want - AGREE_PX)
+    hi = np.searchsorted(keys, want + AGREE_PX, side="right")
+    out: dict[int, int] = {}
+    for a in np.flatnonzero(hi > lo):
+        for b in srt[lo[a]:hi[a]]:
+            ka, kb = table[sids[a]], table[sids[b]]
+            big, small = (a, b) if size[a] >= size[b] else (b, a)
+            if (ka == kb or size[small] >= AGREE_SHORT or size[big] < max(2 * size[small], AGREE_SHORT)
+                    or not fg[sids[big]]):
+                continue
+            k = table[sids[big]]
+            step = depth_on(rays[[last[a], first[b]]], planes[[k, k]])
+            if abs(step[0] - step[1]) < tol_mm:
+                out[int(sids[small])] = int(k)
     return out
 
 

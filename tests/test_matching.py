@@ -560,3 +560,28 @@ def test_a_piece_grows_best_supported_first(tmp_path, monkeypatch):
     assert right() > 0.99
     monkeypatch.setattr(m, "GROWTH_COVER", 0.0)  # every majority joins at once, as before
     assert right() < 0.9
+
+
+def test_a_short_piece_that_runs_straight_on_from_a_long_stripe_takes_its_index():
+    """Linking cuts a stripe where its row neighbours change; a short piece cut off so and labelled a
+    stripe off (near the floor, from its neighbours) goes on in the next row, in the same column, at the
+    same depth on the long piece's plane: it takes the long piece's index. Not when it starts a few
+    columns over, and not from a long piece that is not the animal's."""
+    from types import SimpleNamespace
+
+    from measurement.matching import _agree_along
+
+    planes, rays, seg, left, right, lab = _steep_ramp(0.0, range(10, 16), np.arange(-40, 40))
+    v = np.rint(rays[:, 1] * 1100.0).astype(np.int64)  # z = 1100 mm on a flat surface: y (mm) is the row
+    c = SimpleNamespace(u=rays[:, 0] * 3000.0 + 1536.0, v=v)
+    seg = seg.copy()
+    cut = (lab == 12) & (v >= 30)  # stripe 12's last 10 rows, a piece of their own
+    seg[cut] = seg.max() + 1
+    short = int(seg[cut][0])
+    labels = {int(s): int(lab[seg == s][0]) for s in np.unique(seg)}
+    labels[short] = 13  # one off
+    animal = set(labels)
+    assert _agree_along(c, rays, planes, seg, labels, animal, 20.0) == {short: 12}
+    assert _agree_along(c, rays, planes, seg, labels, animal - {int(seg[lab == 12][0])}, 20.0) == {}
+    shifted = SimpleNamespace(u=np.where(cut, c.u + 3.0, c.u), v=v)  # starts 3 px over
+    assert _agree_along(shifted, rays, planes, seg, labels, animal, 20.0) == {}
