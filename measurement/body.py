@@ -118,20 +118,17 @@ def beside(animal: np.ndarray, points: np.ndarray, background: np.ndarray | None
         return out & False
     if background is not None and len(background):
         out &= np.abs(points @ background[:, :3].T - background[:, 3]).min(axis=1) > margin_mm
-    origin = animal.min(axis=0) - voxel_mm
+    from scipy import ndimage
+
+    origin = animal.min(axis=0) - voxel_mm  # one spare cell on each side of the animal's voxels
     cells = np.floor((animal - origin) / voxel_mm).astype(np.int64)
-    dims = cells.max(axis=0) + 3  # one spare cell on each side
-    occupied = np.unique((cells[:, 0] * dims[1] + cells[:, 1]) * dims[2] + cells[:, 2])
+    grid = np.zeros(tuple(cells.max(axis=0) + 3), bool)
+    grid[tuple(cells.T)] = True
+    grid = ndimage.binary_dilation(grid, structure=np.ones((3, 3, 3), bool))  # the animal's and beside it
     at = np.floor((np.nan_to_num(points) - origin) / voxel_mm).astype(np.int64)
-    near = np.zeros(len(points), bool)
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            for dk in (-1, 0, 1):
-                q = at + (di, dj, dk)
-                inside = ((q >= 0) & (q < dims)).all(axis=1)
-                key = (q[:, 0] * dims[1] + q[:, 1]) * dims[2] + q[:, 2]
-                near |= inside & np.isin(key, occupied)
-    return out & near
+    inside = ((at >= 0) & (at < grid.shape)).all(axis=1)
+    out[inside] &= grid[tuple(at[inside].T)]
+    return out & inside
 
 
 def planar_share(points: np.ndarray, planes: int = 3, tol_mm: float = 2.0, most: int = 3000) -> float:
@@ -322,16 +319,16 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
         return out
     # the cross-check and the length need only the points and their rows: beside the extents
     box = second_core().submit(_box, points)
-    length_points = (points, stripe, rows, groups)
+    lp, ls, lr, lg = points, stripe, rows, groups
     if wide is not None and len(wide[1]):
         thin = ~np.isin(wide[1], groups)  # only stripes the cloud makes no group of
         if thin.any():
             lp = np.concatenate([points, wide[0][thin]])
             ls, lr = np.concatenate([stripe, wide[1][thin]]), np.concatenate([rows, wide[2][thin]])
             k2, c2 = _stripe_counts(ls)
-            length_points = (lp, ls, lr, [int(k) for k, n in zip(k2, c2, strict=True) if n >= params.min_group])
-            out["length_wide_groups"] = sorted(set(length_points[3]) - set(groups))
-    length_job = second_core().submit(_length, *length_points, params.min_group)
+            lg = [int(k) for k, n in zip(k2, c2, strict=True) if n >= params.min_group]
+            out["length_wide_groups"] = sorted(set(lg) - set(groups))
+    length_job = second_core().submit(_length, lp, ls, lr, lg, params.min_group)
     # each group's points in their original order (one stable sort instead of a mask per group)
     order = _stable_order(stripe)
     ks_sorted, ks_arr = stripe[order], np.array(groups)
