@@ -1,7 +1,7 @@
 """Scan pipeline accuracy and speed on the rig simulator (full resolution by default).
 
     python bench/scan.py [--size 3072x2048] [--cache DIR] [--repeats 7] [--configs 40-fur,40-clean,50-fur] [--ambient]
-                         [--calibrated] [--seeds 4,8,9,10,12]
+                         [--calibrated] [--seeds 4,8,9,10,12] [--gamma 2.2]
 
 For each configuration (stripe count, fur or clean) and view (side, top): stripe-label correctness
 against the simulator's exact plane crossings, the share of animal points within 2 mm of the true
@@ -61,13 +61,25 @@ def calibrated_for(cache: Path, stripes: int, size: tuple[int, int], poses: int 
     return load_calibration(result.to_dict())
 
 
-def evaluate(cap: Path, view: str, ambient: bool = False, cal=None) -> dict:
+def gamma_encoded(img: np.ndarray, gamma: float) -> np.ndarray:
+    """The 8-bit image a renderer writing a display gamma would have written: 255 (v / vmax)^(1 / gamma)
+    of a linear frame (uint8 or uint16)."""
+    top = 65535.0 if img.dtype == np.uint16 else 255.0
+    return np.clip(np.rint(255.0 * (img.astype(np.float64) / top) ** (1.0 / gamma)), 0, 255).astype(np.uint8)
+
+
+def evaluate(cap: Path, view: str, ambient: bool = False, cal=None, gamma: float | None = None) -> dict:
     """The figures of one view; with ``ambient``, scanned with its stripes-off image too; ``cal`` : the
-    calibration to scan with (default: the simulator's true one)."""
+    calibration to scan with (default: the simulator's true one); with ``gamma``, the images encoded with
+    that display gamma (``gamma_encoded``)."""
     cal = cal or load_calibration(cap / "truth" / "truth.json")
     info = json.loads((cap / "truth" / "truth.json").read_text())["views"][view]
-    img = read_image(cap / "scan" / f"{view}.png")
-    r = scan(img, cal, view, ambient=read_image(cap / "scan" / f"{view}_ambient.png") if ambient else None)
+
+    def image(name: str) -> np.ndarray:
+        img = read_image(cap / "scan" / name)
+        return gamma_encoded(img, gamma) if gamma else img
+
+    r = scan(image(f"{view}.png"), cal, view, ambient=image(f"{view}_ambient.png") if ambient else None)
     t = dict(np.load(cap / "truth" / f"{view}_stripes.npz"))
     tk, kind = match_crossings(r.scene_uv, t)
     on_animal = kind == ANIMAL
@@ -150,6 +162,8 @@ def main() -> None:
     ap.add_argument("--seeds", default=None, help="comma-separated seeds: score every configuration on each")
     ap.add_argument("--configs", default="40-fur,40-clean,50-fur,50-clean")
     ap.add_argument("--ambient", action="store_true", help="scan with each view's ambient (stripes off) image too")
+    ap.add_argument("--gamma", type=float, default=None,
+                    help="encode every scan image with this display gamma first (2.2: as an sRGB renderer writes)")
     ap.add_argument("--calibrated", action="store_true",
                     help="scan with the calibration made from rendered chessboard poses, not the true one")
     args = ap.parse_args()
@@ -168,7 +182,7 @@ def main() -> None:
             first = first or cap
             cal = calibrated_for(cache, int(stripes), size) if args.calibrated else None
             for view in ("side", "top"):
-                e = evaluate(cap, view, args.ambient, cal)
+                e = evaluate(cap, view, args.ambient, cal, args.gamma)
                 scores.append((kind, e))
                 name = cfg if len(seeds) == 1 else f"{cfg}/{seed}"
                 print(f"{name:10s} {view:4s} {e['animal_points']:7d}/{e['animal_truth_crossings']:<6d} "
