@@ -24,6 +24,9 @@ SLOPE_ROWS = 6  # rows over which a segment's end slope is taken
 ROW_GAP = 3  # a step may skip up to two rows without a peak (dark fur cuts a faint stripe)
 MERGE_ROWS = 3  # rows (at a 2048-row image) a stripe's end is followed along a floor or wall stripe
 OTHER_STRIPE_MM = 1.5  # a peak some other light plane puts this close to the floor or wall is that stripe's
+# a walk ends at its first point this close to the floor or wall (or within the cloud's background margin,
+# if wider): a hoof's last rows above the floor are the animal's, the contact below them is not told apart
+FLOOR_STOP_MM = 5.0
 
 
 def faint_ends(c: Centres, labels: np.ndarray, segment: np.ndarray, cloud: np.ndarray, scene: np.ndarray,

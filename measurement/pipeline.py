@@ -15,7 +15,7 @@ import numpy as np
 from .body import BodyParams, beside, isolate_with_margin, measure
 from .calibration import Calibration
 from .detection import DetectionParams, check_image, detect_centres, detect_centres_and_faint, reliable
-from .ends import MERGE_ROWS, end_points, faint_ends
+from .ends import FLOOR_STOP_MM, MERGE_ROWS, end_points, faint_ends
 from .errors import ImageError, ScanError
 from .matching import Labels, MatchingParams, denoise, label_centres, smooth_along_segments
 from .orientation import stripe_axis, swap_xy, transpose_image
@@ -153,7 +153,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
                                     over_background=view == "top")
         if len(eu):
             ep, keep = end_points(eu, ev, ek, ew, table, calibration.planes, labels.background,
-                                  params.body.background_mm, max(1, round(MERGE_ROWS * image.shape[0] / 2048)))
+                                  max(margin, FLOOR_STOP_MM), max(1, round(MERGE_ROWS * image.shape[0] / 2048)))
             ends = (ep[keep], ek[keep], ew[keep])
     meas = measure(animal_pts, animal_stripe, rows[animal], view, params.body, ends,
                    _wide_peaks(centres, smoothed & ~ok, labels, animal_stripe, animal_pts, smooth_u, cells, table,
