@@ -39,13 +39,14 @@ def cmd_simulate(args: argparse.Namespace) -> None:
 
 
 def cmd_calibrate(args: argparse.Namespace) -> None:
-    from measurement.calibration import calibrate, load_intrinsics
+    from measurement.calibration import CalibrationParams, calibrate, load_intrinsics
     from measurement.capture import read_capture
     from measurement.report import write_report
 
     capture = read_capture(Path(args.capture))
     intr = load_intrinsics(Path(args.intrinsics)) if args.intrinsics else None
-    result = calibrate(capture, intrinsics=intr, progress=_progress if args.verbose else None)
+    result = calibrate(capture, intrinsics=intr, params=CalibrationParams(camera_gamma=args.gamma),
+                       progress=_progress if args.verbose else None)
     out = Path(args.output)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result.to_dict(), indent=1))
@@ -64,7 +65,8 @@ def cmd_calibrate(args: argparse.Namespace) -> None:
 def cmd_scan(args: argparse.Namespace) -> None:
     from measurement.scanfiles import scan_files
 
-    summary = scan_files(Path(args.calibration), [Path(p) for p in args.images], Path(args.output), args.view)
+    summary = scan_files(Path(args.calibration), [Path(p) for p in args.images], Path(args.output), args.view,
+                         args.gamma)
     for line in summary:
         print(line)
 
@@ -99,6 +101,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("-o", "--output", default="calibration.json")
     c.add_argument("--intrinsics", default=None, help="reuse the camera of an earlier calibration.json")
     c.add_argument("-v", "--verbose", action="store_true")
+    c.add_argument("--gamma", type=float, default=1.0,
+                   help="the camera's display gamma, recorded for its scans: 1.0 (default) if it writes light "
+                        "linearly, 2.2 if it writes sRGB-like images")
     c.set_defaults(func=cmd_calibrate)
 
     sc = sub.add_parser("scan", help="reconstruct a point cloud and body size from stripe images")
@@ -106,6 +111,8 @@ def build_parser() -> argparse.ArgumentParser:
     sc.add_argument("images", nargs="+")
     sc.add_argument("--view", choices=["side", "top", "front", "back"], default=None)
     sc.add_argument("-o", "--output", default="scan_out")
+    sc.add_argument("--gamma", type=float, default=None,
+                    help="the camera's display gamma for these images (default: the calibration's camera_gamma)")
     sc.set_defaults(func=cmd_scan)
 
     d = sub.add_parser("demo", help="simulate a rig, calibrate, scan, load demo records and serve the app")

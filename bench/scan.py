@@ -1,7 +1,7 @@
 """Scan pipeline accuracy and speed on the rig simulator (full resolution by default).
 
     python bench/scan.py [--size 3072x2048] [--cache DIR] [--repeats 7] [--configs 40-fur,40-clean,50-fur] [--ambient]
-                         [--calibrated] [--seeds 4,8,9,10,12] [--gamma 2.2]
+                         [--calibrated] [--seeds 4,8,9,10,12] [--gamma 2.2 [--linearise]]
 
 For each configuration (stripe count, fur or clean) and view (side, top): stripe-label correctness
 against the simulator's exact plane crossings, the share of animal points within 2 mm of the true
@@ -13,7 +13,9 @@ side by side in this run. Uses the simulator's true calibration, so the figures 
 with --calibrated, the calibration `calibrate` makes from 12 rendered chessboard poses of the same rig
 (seed 11, cached beside the views): the chain a user runs. With --seeds, every configuration is rendered
 and scored for each seed (the table's seed 4 is one animal pose, fur pattern and noise draw), followed by
-how many of the views meet each target; the timing is then skipped.
+how many of the views meet each target; the timing is then skipped. With --gamma G the scan images are
+encoded with display gamma G first (as an sRGB renderer or camera writes them), and with --linearise as
+well the calibration says so (``camera_gamma`` G: the scan linearises them).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import json
 import statistics
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -68,11 +71,14 @@ def gamma_encoded(img: np.ndarray, gamma: float) -> np.ndarray:
     return np.clip(np.rint(255.0 * (img.astype(np.float64) / top) ** (1.0 / gamma)), 0, 255).astype(np.uint8)
 
 
-def evaluate(cap: Path, view: str, ambient: bool = False, cal=None, gamma: float | None = None) -> dict:
+def evaluate(cap: Path, view: str, ambient: bool = False, cal=None, gamma: float | None = None,
+             linearise: bool = False) -> dict:
     """The figures of one view; with ``ambient``, scanned with its stripes-off image too; ``cal`` : the
     calibration to scan with (default: the simulator's true one); with ``gamma``, the images encoded with
-    that display gamma (``gamma_encoded``)."""
+    that display gamma (``gamma_encoded``), and with ``linearise`` the calibration's ``camera_gamma`` set to it."""
     cal = cal or load_calibration(cap / "truth" / "truth.json")
+    if gamma and linearise:
+        cal = replace(cal, gamma=gamma)
     info = json.loads((cap / "truth" / "truth.json").read_text())["views"][view]
 
     def image(name: str) -> np.ndarray:
@@ -164,6 +170,8 @@ def main() -> None:
     ap.add_argument("--ambient", action="store_true", help="scan with each view's ambient (stripes off) image too")
     ap.add_argument("--gamma", type=float, default=None,
                     help="encode every scan image with this display gamma first (2.2: as an sRGB renderer writes)")
+    ap.add_argument("--linearise", action="store_true",
+                    help="with --gamma: scan with a calibration whose camera_gamma is that gamma (linearised)")
     ap.add_argument("--calibrated", action="store_true",
                     help="scan with the calibration made from rendered chessboard poses, not the true one")
     args = ap.parse_args()
@@ -182,7 +190,7 @@ def main() -> None:
             first = first or cap
             cal = calibrated_for(cache, int(stripes), size) if args.calibrated else None
             for view in ("side", "top"):
-                e = evaluate(cap, view, args.ambient, cal, args.gamma)
+                e = evaluate(cap, view, args.ambient, cal, args.gamma, args.linearise)
                 scores.append((kind, e))
                 name = cfg if len(seeds) == 1 else f"{cfg}/{seed}"
                 print(f"{name:10s} {view:4s} {e['animal_points']:7d}/{e['animal_truth_crossings']:<6d} "

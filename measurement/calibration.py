@@ -32,6 +32,9 @@ class Calibration:
     stripe_axis: "vertical" (the paper's rig: the stripes run down the image) or "horizontal"
     transposed : whether this is the frame a horizontal-stripe rig is measured in (``in_row_frame``):
                  the image's rows and columns swapped, and with them x and y of rays, planes and points
+    gamma      : the camera's display gamma (calibration.json's ``camera_gamma``): 1.0 for a camera that
+                 writes light linearly (a machine-vision camera's raw mode), 2.2 for one that writes sRGB-like
+                 (light)^(1 / 2.2); scans linearise its frames with it (``DetectionParams.gamma``)
     """
 
     intrinsics: Intrinsics
@@ -39,6 +42,7 @@ class Calibration:
     meta: dict = field(default_factory=dict)
     stripe_axis: str = "vertical"
     transposed: bool = False
+    gamma: float = 1.0
 
     @property
     def stripes(self) -> int:
@@ -51,7 +55,7 @@ class Calibration:
         if self.stripe_axis == "vertical" or self.transposed:
             return self
         planes = None if self.planes is None else swap_xy(self.planes)
-        return Calibration(self.intrinsics, planes, self.meta, "vertical", True)
+        return Calibration(self.intrinsics, planes, self.meta, "vertical", True, gamma=self.gamma)
 
 
 def load_calibration(src: str | Path | dict) -> Calibration:
@@ -80,7 +84,23 @@ def load_calibration(src: str | Path | dict) -> Calibration:
     axis = data.get("stripe_axis") or "vertical"  # calibrations made before it was recorded: the paper's rig
     if axis not in AXES:
         raise CalibrationError(f"{name}: stripe_axis must be one of {', '.join(AXES)}, got {axis!r}")
-    return Calibration(intr, planes, {k: v for k, v in data.items() if k != "planes"}, axis)
+    return Calibration(intr, planes, {k: v for k, v in data.items() if k != "planes"}, axis,
+                       gamma=camera_gamma(data.get("camera_gamma", 1.0), name))
+
+
+GAMMA_RANGE = (0.2, 5.0)  # display gammas a camera may write with (1.0: linear; sRGB is about 2.2)
+
+
+def camera_gamma(value, name: str = "calibration") -> float:
+    """A camera's display gamma as a float; CalibrationError, naming ``name`` and the field, when it is not a
+    number in ``GAMMA_RANGE`` (None, as calibrations made before it was recorded have it: 1.0, linear)."""
+    if value is None:
+        return 1.0
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+            GAMMA_RANGE[0] <= float(value) <= GAMMA_RANGE[1]):
+        raise CalibrationError(f"{name}: camera_gamma must be a number from {GAMMA_RANGE[0]} to {GAMMA_RANGE[1]} "
+                               f"(1.0: the camera writes light linearly; 2.2: sRGB), got {value!r}")
+    return float(value)
 
 
 def load_intrinsics(src: str | Path | dict) -> Intrinsics:
@@ -98,6 +118,9 @@ class CalibrationParams:
                    "pencil" (robust, then all planes share one axis through the projector)
     min_poses    : fewer usable board poses than this is an error (Zhang's method needs 3)
     outlier_factor: a pose whose reprojection error exceeds this many times the median is dropped
+    camera_gamma : the camera's display gamma, recorded for the scans (``Calibration.gamma``). The board's
+                   stripe centres are read as they are: a stripe on the flat board is a symmetric peak, whose
+                   centre no monotonic encoding moves
     """
 
     stripes: StripeParams = field(default_factory=StripeParams)
@@ -105,6 +128,7 @@ class CalibrationParams:
     plane_method: str = "pencil"
     min_poses: int = 3
     outlier_factor: float = 4.0
+    camera_gamma: float = 1.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -157,9 +181,10 @@ class CalibrationResult:
     stripe_method: str | None = None
     stripe_axis: str = "vertical"
     seconds: float = 0.0
+    camera_gamma: float = 1.0
 
     def calibration(self) -> Calibration:
-        return Calibration(self.intrinsics, self.planes, self.to_dict(), self.stripe_axis)
+        return Calibration(self.intrinsics, self.planes, self.to_dict(), self.stripe_axis, gamma=self.camera_gamma)
 
     def to_dict(self) -> dict:
         d = {
@@ -173,6 +198,7 @@ class CalibrationResult:
             "plane_points": None if self.plane_points is None else self.plane_points.tolist(),
             "stripes": 0 if self.planes is None else len(self.planes),
             "stripe_axis": self.stripe_axis,
+            "camera_gamma": self.camera_gamma,
             "plane_method": self.plane_method,
             "stripe_method": self.stripe_method,
             "rig": self.rig,
@@ -205,6 +231,7 @@ def calibrate(capture: Capture, intrinsics: Intrinsics | None = None, params: Ca
     ``params.min_poses`` poses remain, naming the files.
     """
     params = params or CalibrationParams()
+    camera_gamma(params.camera_gamma, "calibrate")
     report = progress or (lambda f, s: None)
     t0 = time.perf_counter()
     rig = capture.rig
@@ -243,7 +270,7 @@ def calibrate(capture: Capture, intrinsics: Intrinsics | None = None, params: Ca
             groups[k].append(pts)
     have_stripes = any(p.stripes is not None for p in capture.poses)
     result = dict(intrinsics=intr, reprojection_error_px=e1, poses=pose_reports, rig=rig.to_dict(),
-                  stripe_method=params.stripes.method, stripe_axis=axis)
+                  stripe_method=params.stripes.method, stripe_axis=axis, camera_gamma=float(params.camera_gamma))
     if not have_stripes:
         return CalibrationResult(**result, seconds=time.perf_counter() - t0)
     plane_poses = [p for p in pose_reports if p.used_for_planes]

@@ -8,7 +8,7 @@ The one function the CLI, the jobs and the benchmark call. Stages: centre detect
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -101,6 +101,8 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     image = np.asarray(image)
     size = calibration.intrinsics.image_size
     check_image(image, (size[1], size[0]) if calibration.transposed else size)
+    if params.detection.gamma is None and calibration.gamma != 1.0:  # the camera's own encoding
+        params = replace(params, detection=replace(params.detection, gamma=calibration.gamma))
     t = {"start": time.perf_counter()}
     if params.faint_ends:
         centres, faint = detect_centres_and_faint(image, params.detection, ambient)

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
-from .calibration import load_calibration
+from .calibration import camera_gamma, load_calibration
 from .errors import MeasurementError, ScanError, naming_files
 from .images import read_image
 from .pipeline import VIEWS, scan
@@ -23,13 +24,17 @@ def view_of(path: Path, given: str | None) -> str:
     raise ScanError(f"{path.name}: cannot tell the view from the file name; pass --view side|top|front|back")
 
 
-def scan_files(calibration_path: Path, images: list[Path], out: Path, view: str | None = None) -> list[str]:
+def scan_files(calibration_path: Path, images: list[Path], out: Path, view: str | None = None,
+               gamma: float | None = None) -> list[str]:
     """Scan each image; one image writes into OUT, several into OUT/<image stem>/. Returns summary lines.
 
-    An ``<name>_ambient.<ext>`` beside an image (projector off) is used to cancel room light. Every error
+    An ``<name>_ambient.<ext>`` beside an image (projector off) is used to cancel room light. ``gamma``: the
+    camera's display gamma for these images, instead of the calibration's ``camera_gamma``. Every error
     names the image file it is about (the core's own messages say "image" or "ambient image").
     """
     cal = load_calibration(calibration_path)
+    if gamma is not None:  # the camera's encoding, given for this scan (a calibration made without it)
+        cal = replace(cal, gamma=camera_gamma(gamma, "--gamma"))
     if len(images) > 1:
         seen: dict[str, Path] = {}
         for path in images:

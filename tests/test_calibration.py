@@ -43,7 +43,28 @@ def test_calibration_json_holds_the_contract_fields(small_calibration, tmp_path)
     path.write_text(json.dumps(d))
     back = load_calibration(path)
     assert np.allclose(back.planes, small_calibration.planes) and back.stripes == 40
+    assert d["camera_gamma"] == 1.0 and back.gamma == 1.0
     assert write_report(small_calibration, tmp_path / "report.png").stat().st_size > 1000
+
+
+def test_the_camera_s_display_gamma_is_recorded_read_and_checked(small_calibration, tmp_path):
+    """``camera_gamma`` says how the camera encodes light (1.0: linearly; 2.2: sRGB-like); calibration.json
+    records it, the scans read it (also in the transposed frame of a horizontal-stripe rig), a calibration
+    made before it was recorded is linear, and a value that is not a plausible gamma is refused by name."""
+    from dataclasses import replace
+
+    d = {**small_calibration.to_dict(), "camera_gamma": 2.2}
+    cal = load_calibration(d)
+    assert cal.gamma == 2.2 and replace(cal, stripe_axis="horizontal").in_row_frame().gamma == 2.2
+    assert load_calibration({k: v for k, v in d.items() if k != "camera_gamma"}).gamma == 1.0
+    assert load_calibration({**d, "camera_gamma": None}).gamma == 1.0
+    assert replace(small_calibration, camera_gamma=1.8).calibration().gamma == 1.8
+    (tmp_path / "cal.json").write_text(json.dumps({**d, "camera_gamma": 0}))
+    for bad in ("2.2", True, -1, 0, 9.0, [2.2]):
+        with pytest.raises(CalibrationError, match="camera_gamma must be a number from 0.2 to 5.0"):
+            load_calibration({**d, "camera_gamma": bad})
+    with pytest.raises(CalibrationError, match="cal.json: camera_gamma"):
+        load_calibration(tmp_path / "cal.json")
 
 
 def test_paper_plane_form_and_pencil_agree_with_truth_within_targets(small_capture, small_truth):
