@@ -101,9 +101,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("-o", "--output", default="calibration.json")
     c.add_argument("--intrinsics", default=None, help="reuse the camera of an earlier calibration.json")
     c.add_argument("-v", "--verbose", action="store_true")
-    c.add_argument("--gamma", type=float, default=1.0,
-                   help="the camera's display gamma, recorded for its scans: 1.0 (default) if it writes light "
-                        "linearly, 2.2 if it writes sRGB-like images")
+    c.add_argument("--gamma", type=float, default=None,
+                   help="the camera's display gamma, recorded for its scans: 1.0 if it writes light linearly, "
+                        "2.2 if it writes sRGB-like images (default: rig.json's camera_gamma, else 1.0)")
     c.set_defaults(func=cmd_calibrate)
 
     sc = sub.add_parser("scan", help="reconstruct a point cloud and body size from stripe images")

@@ -49,6 +49,7 @@ class CalibrationOut(SQLModel):
     board_rows: int
     square_mm: float
     stripes: int
+    camera_gamma: float
     files: list[str]
     created_at: UTCDateTime
     finished_at: UTCDateTime | None

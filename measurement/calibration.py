@@ -14,7 +14,7 @@ import numpy as np
 
 from .board import BoardParams, abc_to_plane, find_corners, fit_plane_abc, object_points
 from .camera import Intrinsics, rays
-from .capture import Capture
+from .capture import Capture, gamma_problem
 from .errors import CalibrationError, StripeDetectionError
 from .orientation import AXES, stripe_axis, swap_xy, transpose_image
 from .planes import fit_planes_detailed, plane_error_e2, planes_to_abc, point_plane_distance
@@ -88,18 +88,14 @@ def load_calibration(src: str | Path | dict) -> Calibration:
                        gamma=camera_gamma(data.get("camera_gamma", 1.0), name))
 
 
-GAMMA_RANGE = (0.2, 5.0)  # display gammas a camera may write with (1.0: linear; sRGB is about 2.2)
-
-
 def camera_gamma(value, name: str = "calibration") -> float:
     """A camera's display gamma as a float; CalibrationError, naming ``name`` and the field, when it is not a
-    number in ``GAMMA_RANGE`` (None, as calibrations made before it was recorded have it: 1.0, linear)."""
+    number in ``capture.GAMMA_RANGE`` (None, as calibrations made before it was recorded have it: 1.0, linear)."""
     if value is None:
         return 1.0
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
-            GAMMA_RANGE[0] <= float(value) <= GAMMA_RANGE[1]):
-        raise CalibrationError(f"{name}: camera_gamma must be a number from {GAMMA_RANGE[0]} to {GAMMA_RANGE[1]} "
-                               f"(1.0: the camera writes light linearly; 2.2: sRGB), got {value!r}")
+    problem = gamma_problem(value)
+    if problem:
+        raise CalibrationError(f"{name}: {problem}")
     return float(value)
 
 
@@ -118,9 +114,10 @@ class CalibrationParams:
                    "pencil" (robust, then all planes share one axis through the projector)
     min_poses    : fewer usable board poses than this is an error (Zhang's method needs 3)
     outlier_factor: a pose whose reprojection error exceeds this many times the median is dropped
-    camera_gamma : the camera's display gamma, recorded for the scans (``Calibration.gamma``). The board's
-                   stripe centres are read as they are: a stripe on the flat board is a symmetric peak, whose
-                   centre no monotonic encoding moves
+    camera_gamma : the camera's display gamma, recorded for the scans (``Calibration.gamma``); None: the
+                   capture's rig.json's (``RigSettings.camera_gamma``). The board's stripe centres are read as
+                   they are: a stripe on the flat board is a symmetric peak, whose centre no monotonic
+                   encoding moves
     """
 
     stripes: StripeParams = field(default_factory=StripeParams)
@@ -128,7 +125,7 @@ class CalibrationParams:
     plane_method: str = "pencil"
     min_poses: int = 3
     outlier_factor: float = 4.0
-    camera_gamma: float = 1.0
+    camera_gamma: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -231,7 +228,7 @@ def calibrate(capture: Capture, intrinsics: Intrinsics | None = None, params: Ca
     ``params.min_poses`` poses remain, naming the files.
     """
     params = params or CalibrationParams()
-    camera_gamma(params.camera_gamma, "calibrate")
+    gamma = capture.rig.camera_gamma if params.camera_gamma is None else camera_gamma(params.camera_gamma, "calibrate")
     report = progress or (lambda f, s: None)
     t0 = time.perf_counter()
     rig = capture.rig
@@ -270,7 +267,7 @@ def calibrate(capture: Capture, intrinsics: Intrinsics | None = None, params: Ca
             groups[k].append(pts)
     have_stripes = any(p.stripes is not None for p in capture.poses)
     result = dict(intrinsics=intr, reprojection_error_px=e1, poses=pose_reports, rig=rig.to_dict(),
-                  stripe_method=params.stripes.method, stripe_axis=axis, camera_gamma=float(params.camera_gamma))
+                  stripe_method=params.stripes.method, stripe_axis=axis, camera_gamma=float(gamma))
     if not have_stripes:
         return CalibrationResult(**result, seconds=time.perf_counter() - t0)
     plane_poses = [p for p in pose_reports if p.used_for_planes]

@@ -20,12 +20,15 @@ VIEWS = ("side", "top", "front", "back")
 
 @dataclass(frozen=True)
 class RigSettings:
-    """Chessboard inner corners (OpenCV pattern size), square size in mm and projector stripe count."""
+    """Chessboard inner corners (OpenCV pattern size), square size in mm and projector stripe count; and
+    the camera's display gamma (optional in rig.json: 1.0, linear; 2.2 for a camera writing sRGB-like
+    images), which the calibration records for its scans (``Calibration.gamma``)."""
 
     board_cols: int
     board_rows: int
     square_mm: float
     stripes: int
+    camera_gamma: float = 1.0
 
     def __post_init__(self) -> None:
         for name in ("board_cols", "board_rows", "stripes"):
@@ -34,6 +37,9 @@ class RigSettings:
                 raise CaptureError(f"rig.json: {name} must be an integer >= 2, got {v!r}")
         if not (isinstance(self.square_mm, (int, float)) and 0 < self.square_mm < 1000):
             raise CaptureError(f"rig.json: square_mm must be a positive number of millimetres, got {self.square_mm!r}")
+        problem = gamma_problem(self.camera_gamma)
+        if problem:
+            raise CaptureError(f"rig.json: {problem}")
 
     @classmethod
     def from_dict(cls, d: dict, source: str = "rig.json") -> RigSettings:
@@ -52,11 +58,27 @@ class RigSettings:
             except (TypeError, ValueError):
                 raise CaptureError(f"{source}: {key} must be a{'n integer' if kind is int else ' number'}, "
                                    f"got {v!r}") from None
-        return cls(**values)
+        gamma = d.get("camera_gamma")
+        problem = gamma_problem(gamma) if gamma is not None else None
+        if problem:
+            raise CaptureError(f"{source}: {problem}")
+        return cls(**values, camera_gamma=1.0 if gamma is None else float(gamma))
 
     def to_dict(self) -> dict:
         return {"board_cols": self.board_cols, "board_rows": self.board_rows,
-                "square_mm": self.square_mm, "stripes": self.stripes}
+                "square_mm": self.square_mm, "stripes": self.stripes, "camera_gamma": self.camera_gamma}
+
+
+GAMMA_RANGE = (0.2, 5.0)  # display gammas a camera may write with (1.0: linear; sRGB is about 2.2)
+
+
+def gamma_problem(value) -> str | None:
+    """What is wrong with a camera display gamma ``value`` (None if it is a number in ``GAMMA_RANGE``)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not (
+            GAMMA_RANGE[0] <= float(value) <= GAMMA_RANGE[1]):
+        return (f"camera_gamma must be a number from {GAMMA_RANGE[0]} to {GAMMA_RANGE[1]} (1.0: the camera "
+                f"writes light linearly; 2.2: sRGB), got {value!r}")
+    return None
 
 
 @dataclass(frozen=True, eq=False)

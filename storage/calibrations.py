@@ -13,7 +13,8 @@ from .models import Calibration, CalibrationFile, Job, JobKind, JobStatus
 def create_calibration(session: Session, rig: dict, files: dict[str, bytes], name: str = "") -> tuple[Calibration, Job]:
     """Store rig settings and capture files (path -> bytes) and queue the calibration job."""
     calibration = Calibration(name=name, board_cols=rig["board_cols"], board_rows=rig["board_rows"],
-                              square_mm=rig["square_mm"], stripes=rig["stripes"])
+                              square_mm=rig["square_mm"], stripes=rig["stripes"],
+                              camera_gamma=rig.get("camera_gamma", 1.0))
     session.add(calibration)
     session.flush()
     for path, data in sorted(files.items()):
@@ -49,7 +50,8 @@ def calibration_file_names(session: Session, calibration_id: int) -> list[str]:
 def rig_of(calibration: Calibration) -> dict:
     """The rig settings of a calibration as in rig.json."""
     return {"board_cols": calibration.board_cols, "board_rows": calibration.board_rows,
-            "square_mm": calibration.square_mm, "stripes": calibration.stripes}
+            "square_mm": calibration.square_mm, "stripes": calibration.stripes,
+            "camera_gamma": calibration.camera_gamma}
 
 
 def store_result(session: Session, calibration_id: int, result: dict) -> None:

@@ -156,6 +156,7 @@ class Calibration(SQLModel, table=True):
     board_rows: int
     square_mm: float
     stripes: int
+    camera_gamma: float = Field(default=1.0)  # the camera's display gamma (1.0: linear, 2.2: sRGB-like)
     status: JobStatus = Field(default=JobStatus.queued, sa_type=String(16))
     error: str | None = Field(default=None, max_length=4000)
     result: dict | None = Field(default=None, sa_type=JSON)

@@ -115,6 +115,28 @@ def test_invalid_rig_values_name_the_field(client):
     assert "square_mm" in r.json()["message"]
 
 
+def test_the_camera_s_display_gamma_comes_from_the_form_or_rig_json_and_is_checked(client):
+    """A camera writing sRGB-like images is calibrated with camera_gamma 2.2 (linear, 1.0, by default): the
+    record keeps it for the scans; an implausible value is refused, naming the field, and nothing is stored."""
+    r = client.post("/api/calibrations", files=pose_files(1), data=RIG)
+    assert client.get(f"/api/calibrations/{r.json()['id']}").json()["camera_gamma"] == 1.0
+    r = client.post("/api/calibrations", files=pose_files(1), data={**RIG, "camera_gamma": "2.2"})
+    assert r.status_code == 202, r.text
+    assert client.get(f"/api/calibrations/{r.json()['id']}").json()["camera_gamma"] == 2.2
+    rig_json = json.dumps({**RIG, "camera_gamma": 1.8}).encode()
+    r = client.post("/api/calibrations", files={"archive": ("c.zip", zip_bytes({"rig.json": rig_json,
+                                                                                  "calib/pose_01_board.png": png()}))})
+    assert client.get(f"/api/calibrations/{r.json()['id']}").json()["camera_gamma"] == 1.8
+    before = stored_calibrations(client)
+    r = client.post("/api/calibrations", files=pose_files(1), data={**RIG, "camera_gamma": "9"})
+    assert r.status_code == 422 and "camera_gamma" in r.json()["message"]
+    rig_json = json.dumps({**RIG, "camera_gamma": "sRGB"}).encode()
+    r = client.post("/api/calibrations", files={"archive": ("c.zip", zip_bytes({"rig.json": rig_json,
+                                                                                  "calib/pose_01_board.png": png()}))})
+    assert r.status_code == 422 and "rig.json: camera_gamma must be a number" in r.json()["detail"]
+    assert stored_calibrations(client) == before
+
+
 def test_files_and_archive_together_or_neither_are_refused(client):
     both = pose_files(1) + [("archive", ("c.zip", zip_bytes({"rig.json": b"{}"})))]
     for files in (both, None):

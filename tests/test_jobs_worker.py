@@ -104,7 +104,8 @@ def test_bodyscan_worker_once_runs_a_real_calibration_job(tmp_path):
     url = f"sqlite:///{tmp_path / 'bodyscan.db'}"
     engine = migrated_engine(url)
     with session_scope(engine) as db:
-        cal, job = calibrations.create_calibration(db, json.loads((cap / "rig.json").read_text()), files)
+        rig = {**json.loads((cap / "rig.json").read_text()), "camera_gamma": 2.2}  # recorded for its scans
+        cal, job = calibrations.create_calibration(db, rig, files)
     env = {k: v for k, v in os.environ.items() if not k.startswith("BODYSCAN_")}
     env.update(BODYSCAN_DATABASE_URL=url, PYTHONPATH=str(ROOT))
     out = subprocess.run([sys.executable, "-m", "app.cli", "worker", "--once"], env=env, capture_output=True,
@@ -115,6 +116,7 @@ def test_bodyscan_worker_once_runs_a_real_calibration_job(tmp_path):
         done, record = get_job(db, job.id), calibrations.get_calibration(db, cal.id)
     assert done.status == JobStatus.succeeded, done.error
     assert record.result["image_size"] == [640, 427] and record.result["reprojection_error_px"] < 0.5
+    assert record.result["camera_gamma"] == 2.2 and record.result["rig"]["camera_gamma"] == 2.2
     engine.dispose()
 
 

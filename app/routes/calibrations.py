@@ -12,6 +12,7 @@ from app.errors import BadUpload
 from app.schemas import Accepted, CalibrationOut
 from app.tasks import ARCHIVE
 from app.uploads import capture_path, read_upload
+from measurement.capture import GAMMA_RANGE
 from storage import calibrations
 from storage.jobs import job_for
 from storage.models import Calibration, JobKind
@@ -33,6 +34,10 @@ def create_calibration(
     board_rows: Annotated[int | None, Form(ge=2, le=MAX_CORNERS, description="chessboard inner corners along a column")] = None,
     square_mm: Annotated[float | None, Form(gt=0, lt=1000, description="chessboard square size, mm")] = None,
     stripes: Annotated[int | None, Form(ge=2, le=MAX_STRIPES, description="projector stripe count")] = None,
+    camera_gamma: Annotated[float | None, Form(ge=GAMMA_RANGE[0], le=GAMMA_RANGE[1],
+                                               description="the camera's display gamma: 1.0 if it writes light "
+                                                           "linearly (default), 2.2 if it writes sRGB-like "
+                                                           "images")] = None,
     name: Annotated[str, Form(max_length=200)] = "",
 ):
     """Store the capture and queue the calibration job. Rig fields override the upload's rig.json.
@@ -44,6 +49,8 @@ def create_calibration(
              if v is not None}
     stored, load = _read(files, archive, settings.max_upload_bytes)
     rig = _validated_rig(load, given)
+    if camera_gamma is not None:
+        rig["camera_gamma"] = camera_gamma
     record, job = calibrations.create_calibration(db, rig, stored, name=name.strip())
     return Accepted(id=record.id, job_id=job.id)
 
