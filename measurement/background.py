@@ -14,17 +14,23 @@ from .triangulation import depth_for_labels, intersect
 
 
 def background_planes(rays: np.ndarray, planes: np.ndarray, labels: np.ndarray, tol_mm: float = 8.0,
-                       max_planes: int = 4, first_share: float = 0.2, next_share: float = 0.1) -> np.ndarray | None:
+                       max_planes: int = 4, first_share: float = 0.2, next_share: float = 0.1,
+                       points: np.ndarray | None = None) -> np.ndarray | None:
     """The dominant planes (floor, wall) of the labelled cloud, (P, 4); None when no plane carries
     ``first_share`` of it (no planar background to separate from). A further plane needs ``next_share``:
     with a noisy sensor the floor's rows are labelled far less often than the wall's. Up to four: a
-    weighing platform adds its front and its top to the wall and the floor."""
+    weighing platform adds its front and its top to the wall and the floor.
+    ``points`` : (M, 3) mm, each centre's point on its label's plane where it has one
+    (``intersect(rays, planes[labels])``, ray by ray), when known."""
     from .planes import fit_plane_robust
 
     idx = np.nonzero(labels >= 0)[0]
     if len(idx) < 200:
         return None
-    pts = intersect(rays.take(idx, axis=0), planes.take(labels[idx], axis=0))
+    if points is None:
+        pts = intersect(rays.take(idx, axis=0), planes.take(labels[idx], axis=0))
+    else:
+        pts = points.take(idx, axis=0)
     found: list[np.ndarray] = []
     rest = np.ones(len(idx), bool)
     rng = np.random.default_rng(0)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -260,10 +261,11 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     labels = _labels_of(seg, seg_label, long_seg)
     # 2: a stripe that continued across the animal's outline in the image carried a background index
     # onto the animal; such centres sit off the background surfaces: cut them off as foreground
-    bg_planes = background_planes(rays, planes, labels)
+    on_label = intersect(rays, planes.take(np.clip(labels, 0, n - 1), axis=0))  # (M, 3) mm, read where labelled
+    bg_planes = background_planes(rays, planes, labels, points=on_label)
     complete = labels  # the complete rows' labels: where a plane before a parallel one was seen
     if bg_planes is not None:
-        on_bg = near_planes(intersect(rays, planes.take(np.clip(labels, 0, n - 1), axis=0)), bg_planes) & (labels >= 0)
+        on_bg = near_planes(on_label, bg_planes) & (labels >= 0)
         off_bg = foreground_mask(c, seg, labels, on_bg)
         # the foreground is re-linked on the second core; the stripe spacing needs only the labels kept
         relinked = second_core().submit(relink_foreground, c, seg, labels, off_bg, link, params.min_segment_rows)
@@ -302,14 +304,16 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
                   gaps=(1,), min_share=0.8, slope=True, pairs=fg_pairs)
     seg_label.update(fg_labels)
     if fg_labels:  # a stripe cut into pieces along its length (a tail tip) keeps its label
+        ends = _segment_ends(c, seg, ~weak)  # (both continuations below run on this ``seg``)
         seg_label.update(_continue_along(c, rays, planes, seg, seg_label, fg_mask, set(fg_labels), link,
-                                         0.25 * spacing_mm, lit))
+                                         0.25 * spacing_mm, lit, ends=ends))
         # a short segment that runs straight on from a long one of the animal takes its index
         fixed = _agree_along(c, rays, planes, seg, seg_label, set(seg_label) - set(bg_labels), 0.25 * spacing_mm)
         if fixed:
             seg_label.update(fixed)
             seg_label.update(_continue_along(c, rays, planes, seg, seg_label, fg_mask,
-                                             set(seg_label) - set(bg_labels), link, 0.25 * spacing_mm, lit))
+                                             set(seg_label) - set(bg_labels), link, 0.25 * spacing_mm, lit,
+                                             ends=ends))
     if fg_labels and small:  # isolated small pieces (a head seen from above) hemmed in by what is placed
         seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit, table,
                                       anchor=from_above))
@@ -694,8 +698,39 @@ def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask,
     return int(shift)
 
 
+class _Ends(NamedTuple):
+    """The segments' centres top down and their ends, for ``_continue_along``: ``order`` (M,) the centres by
+    segment, then row (``segment_rows``); ``bounds`` (R + 1,) the runs of ``order``, a segment each;
+    ``sid_run`` (S,) each segment's run (-1 for none); ``first``, ``last`` (S,) its top and bottom centre
+    (-1 for none); ``good`` (S,) whether at least 0.6 of its centres are reliable peaks."""
+
+    order: np.ndarray
+    bounds: np.ndarray
+    sid_run: np.ndarray
+    first: np.ndarray
+    last: np.ndarray
+    good: np.ndarray
+
+
+def _segment_ends(c: Centres, seg: np.ndarray, ok: np.ndarray | None = None) -> _Ends:
+    """``_Ends`` of the segments ``seg`` (M,); ``ok`` : ``detection.reliable(c)`` (M,), when known."""
+    ok = reliable(c) if ok is None else ok
+    n_seg = seg.max() + 1
+    good = np.bincount(seg, weights=ok, minlength=n_seg) >= 0.6 * np.bincount(seg, minlength=n_seg)
+    order = segment_rows(seg, c.v)
+    s_sorted = seg[order]
+    bounds = runs(s_sorted)  # a segment each, top down
+    sids = s_sorted[bounds[:-1]]
+    sid_run = np.full(n_seg, -1)
+    sid_run[sids] = np.arange(len(sids))  # each segment's run in ``order``
+    first = np.full(n_seg, -1)
+    last = np.full(n_seg, -1)
+    first[sids], last[sids] = order[bounds[:-1]], order[bounds[1:] - 1]
+    return _Ends(order, bounds, sid_run, first, last, good)
+
+
 def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px, tol_mm,
-                    lit: np.ndarray | None = None, rounds: int = 6) -> dict[int, int]:
+                    lit: np.ndarray | None = None, rounds: int = 6, ends: _Ends | None = None) -> dict[int, int]:
     """Labels for unlabelled segments in ``mask`` (M,) that continue a labelled animal segment (in
     ``animal``) along its stripe: one starts one to four rows below where the other ends (or ends above
     where it starts), within ``link_px`` columns (times the rows of the gap beyond the first), and on
@@ -706,25 +741,17 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
     centres are mostly reliable peaks continue a stripe: the fur's stray specks beside a stripe's end are
     one-sided or wide. With the ``lit`` projector cells (``lit_cells``) a segment that would put more than
     a quarter of its cells on lit background does not continue the stripe either: something else lit those
-    projector rays."""
+    projector rays. ``ends`` : the ``_segment_ends`` of ``seg``, when known (two calls on one ``seg`` share
+    them)."""
     out: dict[int, int] = {}
     table = label_table(seg, seg_label)
-    good = np.bincount(seg, weights=reliable(c), minlength=seg.max() + 1) >= 0.6 * np.bincount(
-        seg, minlength=seg.max() + 1)
-    order = segment_rows(seg, c.v)
-    s_sorted = seg[order]
-    bounds = runs(s_sorted)  # a segment each, top down
-    sids = s_sorted[bounds[:-1]]
-    sid_run = np.full(seg.max() + 1, -1)
-    sid_run[sids] = np.arange(len(sids))  # each segment's run in ``order``
-    first = np.full(seg.max() + 1, -1)
-    last = np.full(seg.max() + 1, -1)
-    first[sids], last[sids] = order[bounds[:-1]], order[bounds[1:] - 1]
+    order, bounds, sid_run, first, last, good = _segment_ends(c, seg) if ends is None else ends
     in_mask = np.zeros(seg.max() + 1, bool)
     in_mask[seg[mask]] = True
     is_animal = np.zeros(seg.max() + 1, bool)
     is_animal[np.fromiter(animal, np.int64, len(animal))] = True
     span = 4.0 * (float(c.u.max()) + link_px + 1.0)  # row key stride: wider than any column plus the link
+    shares: dict[tuple[int, int], float] = {}  # (segment, label) -> ``_lit_share``
     for _ in range(rounds):
         done: dict[int, int] = {}
         src = np.flatnonzero(is_animal & (table >= 0))
@@ -753,8 +780,12 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
                     near = np.abs(depth_on(rays.take(a[ai], axis=0), planes.take(k, axis=0))
                                   - depth_on(rays.take(b[bi], axis=0), planes.take(k, axis=0))) < tol_mm
                     for sid, lab in zip(dst[bi][near].tolist(), k[near].tolist(), strict=True):
-                        if sid not in done and _lit_share(rays, planes, order[bounds[sid_run[sid]]:bounds[sid_run[sid] + 1]],
-                                                          lab, lit) <= 0.25:
+                        if sid in done:
+                            continue
+                        if (sid, lab) not in shares:  # (``lit`` is fixed: a pair weighed once is known)
+                            shares[sid, lab] = _lit_share(rays, planes,
+                                                          order[bounds[sid_run[sid]]:bounds[sid_run[sid] + 1]], lab, lit)
+                        if shares[sid, lab] <= 0.25:
                             done[sid] = lab
         if not done:
             break
