@@ -304,11 +304,12 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
                   gaps=(1,), min_share=0.8, slope=True, pairs=fg_pairs)
     seg_label.update(fg_labels)
     if fg_labels:  # a stripe cut into pieces along its length (a tail tip) keeps its label
-        ends = _segment_ends(c, seg, ~weak)  # (both continuations below run on this ``seg``)
+        ends = _segment_ends(c, seg, ~weak)  # (the continuations and _agree_along below run on this ``seg``)
         seg_label.update(_continue_along(c, rays, planes, seg, seg_label, fg_mask, set(fg_labels), link,
                                          0.25 * spacing_mm, lit, ends=ends))
         # a short segment that runs straight on from a long one of the animal takes its index
-        fixed = _agree_along(c, rays, planes, seg, seg_label, set(seg_label) - set(bg_labels), 0.25 * spacing_mm)
+        fixed = _agree_along(c, rays, planes, seg, seg_label, set(seg_label) - set(bg_labels), 0.25 * spacing_mm,
+                             ends)
         if fixed:
             seg_label.update(fixed)
             seg_label.update(_continue_along(c, rays, planes, seg, seg_label, fg_mask,
@@ -799,7 +800,7 @@ AGREE_PX = 1.0  # a segment that starts this close (columns) to where another en
 AGREE_SHORT = 30  # segments under this many centres take the index of the one they go on from
 
 
-def _agree_along(c, rays, planes, seg, seg_label, animal: set, tol_mm) -> dict[int, int]:
+def _agree_along(c, rays, planes, seg, seg_label, animal: set, tol_mm, ends: _Ends | None = None) -> dict[int, int]:
     """New labels for short labelled segments (under ``AGREE_SHORT`` centres) that go straight on from a
     long segment of the ``animal`` (the next row, within ``AGREE_PX`` columns, at least twice as long and
     ``AGREE_SHORT`` long, and within ``tol_mm`` in depth on its light plane) but carry another index: they
@@ -810,15 +811,19 @@ def _agree_along(c, rays, planes, seg, seg_label, animal: set, tol_mm) -> dict[i
     or grown into the floor's labels (a gamma-encoded render's 40-stripe fur side view: stripe 13's last 40
     rows, the height −8.1 %; −2.2 % with this). On the 272 cached views: 1396 more of the animal's centres
     right, 425 fewer wrong, 291 more background centres wrong, no view's placement moved, heights within
-    1 % 76 → 77; the five seeds' heights 23 → 24 of 40 (a 50-stripe clean side view +1.17 → +0.10 %)."""
+    1 % 76 → 77; the five seeds' heights 23 → 24 of 40 (a 50-stripe clean side view +1.17 → +0.10 %).
+    ``ends`` : the ``_segment_ends`` of ``seg``, when known (its order holds the labelled segments' too)."""
     if len(seg_label) < 2 or not animal:
         return {}
     labelled = np.zeros(seg.max() + 1, bool)
     labelled[np.fromiter(seg_label, np.int64, len(seg_label))] = True
     fg = np.zeros(seg.max() + 1, bool)
     fg[np.fromiter(animal, np.int64, len(animal))] = True
-    member = np.flatnonzero(labelled[seg])
-    order = member[segment_rows(seg[member], c.v[member])]
+    if ends is None:
+        member = np.flatnonzero(labelled[seg])
+        order = member[segment_rows(seg[member], c.v[member])]
+    else:  # the same order: that of all the centres, restricted to the labelled segments'
+        order = ends.order[labelled[seg[ends.order]]]
     bounds = runs(seg[order])
     sids = seg[order[bounds[:-1]]]
     first, last = order[bounds[:-1]], order[bounds[1:] - 1]
