@@ -119,19 +119,28 @@ def end_points(u: np.ndarray, v: np.ndarray, k: np.ndarray, walk: np.ndarray, ta
         # the walks' points are listed step by step: a point is kept while no earlier one of its walk was near
         # a background plane, and while it is no more than ``run_rows`` points into a run on one other light
         # plane's floor or wall stripe (where a stripe's end merges with that stripe, its last rows lie on
-        # both; past them only the floor's stripe goes on)
-        stopped = np.zeros(int(walk.max()) + 1, bool)
-        last_other = np.full(int(walk.max()) + 1, -1, np.int64)
-        run = np.zeros(int(walk.max()) + 1, np.int64)
-        for a, b in zip(*_step_bounds(walk), strict=True):
-            w = walk[a:b]
-            run[w] = np.where((other[a:b] >= 0) & (other[a:b] == last_other[w]), run[w] + 1,
-                              (other[a:b] >= 0).astype(np.int64))
-            end = near[a:b] | (run[w] > run_rows)
-            keep[a:b] &= ~stopped[w] & ~end
-            stopped[w[end]] = True
-            last_other[w] = other[a:b]
+        # both; past them only the floor's stripe goes on): one compiled pass (``walk_stops_numpy``, the
+        # NumPy form, is the reference)
+        _kernels.walk_stops(walk, near, other, run_rows, keep)
     return p, keep
+
+
+def walk_stops_numpy(walk: np.ndarray, near: np.ndarray, other: np.ndarray, run_rows: int, keep: np.ndarray
+                     ) -> np.ndarray:
+    """``_kernels.walk_stops`` step by step in NumPy (its reference): clears ``keep`` (E,) past each walk's
+    stop."""
+    stopped = np.zeros(int(walk.max()) + 1, bool)
+    last_other = np.full(int(walk.max()) + 1, -1, np.int64)
+    run = np.zeros(int(walk.max()) + 1, np.int64)
+    for a, b in zip(*_step_bounds(walk), strict=True):
+        w = walk[a:b]
+        run[w] = np.where((other[a:b] >= 0) & (other[a:b] == last_other[w]), run[w] + 1,
+                          (other[a:b] >= 0).astype(np.int64))
+        end = near[a:b] | (run[w] > run_rows)
+        keep[a:b] &= ~stopped[w] & ~end
+        stopped[w[end]] = True
+        last_other[w] = other[a:b]
+    return keep
 
 
 def _step_bounds(walk: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
