@@ -27,8 +27,8 @@ OTHER_STRIPE_MM = 1.5  # a peak some other light plane puts this close to the fl
 
 
 def faint_ends(c: Centres, labels: np.ndarray, segment: np.ndarray, cloud: np.ndarray, scene: np.ndarray,
-               faint: Centres, link_px: float, image_rows: int, over_background: bool = False
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+               faint: Centres, link_px: float, image_rows: int, over_background: bool = False,
+               order: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The rows past each animal segment's ends that its stripe still crosses: u (E,) float64 and v (E,)
     int64 pixels and the stripe index (E,) of each, and the walk (E,) int64 it came from (its points in
     order, from the segment's end outward).
@@ -39,6 +39,7 @@ def faint_ends(c: Centres, labels: np.ndarray, segment: np.ndarray, cloud: np.nd
     faint : the faint peaks of the same image
     link_px : largest column change per row from the stripe's course (its slope over the last rows)
     over_background : the scene's points off the animal (the floor's and wall's) may be stepped on too
+    order : ``segments.segment_rows(segment, c.v)`` (M,), when known (``cloud`` then ascending)
 
     A step goes to the nearest peak in the next row (or up to ``ROW_GAP`` on) within ``link_px`` of where the
     stripe's course leads: a faint peak or a centre with no label or with the walk's own, never one a
@@ -70,10 +71,15 @@ def faint_ends(c: Centres, labels: np.ndarray, segment: np.ndarray, cloud: np.nd
     pool_lab = np.r_[free_lab, np.full(len(faint), -1, np.int64)]
     span = 4.0 * (max(float(pool_u.max(initial=0.0)), float(c.u.max())) + link_px + 2.0)
     pool_key = pool_v * span + pool_u
-    order = np.argsort(pool_key, kind="stable")
-    pool_u, pool_v, pool_lab, pool_key = pool_u[order], pool_v[order], pool_lab[order], pool_key[order]
+    by_key = np.argsort(pool_key, kind="stable")
+    pool_u, pool_v, pool_lab, pool_key = pool_u[by_key], pool_v[by_key], pool_lab[by_key], pool_key[by_key]
     # each animal segment's two ends and the stripe's slope there (du/dv over the last SLOPE_ROWS rows)
-    by_seg = cloud[segment_rows(segment[cloud], c.v[cloud])]
+    if order is None:
+        by_seg = cloud[segment_rows(segment[cloud], c.v[cloud])]
+    else:  # the order of all the centres restricted to the cloud's (distinct, ascending) is theirs
+        in_cloud = np.zeros(len(c), bool)
+        in_cloud[cloud] = True
+        by_seg = order[in_cloud[order]]
     st = runs(segment[by_seg])
     first, last = by_seg[st[:-1]], by_seg[st[1:] - 1]
     near_first = by_seg[np.minimum(st[:-1] + SLOPE_ROWS, st[1:] - 1)]

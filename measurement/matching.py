@@ -222,6 +222,7 @@ class Labels:
     unplaced   : of those, centres left without one (no evidence fixed the piece's absolute index)
     faint_shadow : the animal's first piece was placed from a shallow conflict ramp (its shadow's lit edge
                  mostly hidden): right on 3 of 4 such renders, but weaker evidence than usual
+    segment_order : (M,) the centres by segment, then row (``segments.segment_rows(segment, v)``), or None
     """
 
     stripe: np.ndarray
@@ -230,6 +231,7 @@ class Labels:
     pieces: int = 0
     unplaced: int = 0
     faint_shadow: bool = False
+    segment_order: np.ndarray | None = None
 
 
 def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], planes: np.ndarray,
@@ -274,6 +276,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     else:
         spacing_mm = _stripe_spacing_mm(c, rays, planes, seg, seg_label, left)
     tol = spacing_mm * params.continuity
+    by_segment = segment_rows(seg, c.v)  # the centres by segment, then row: ``seg`` is final from here on
     # 3: the background grows over its own surfaces; a segment joins it only if it then lies on them
     pairs = _neighbour_pairs(seg, long_seg, left, right)  # every growth below takes its centres' share
     _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, 1.7 * spacing_mm, n, bg_planes, pairs=pairs)
@@ -304,7 +307,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
                   gaps=(1,), min_share=0.8, slope=True, pairs=fg_pairs)
     seg_label.update(fg_labels)
     if fg_labels:  # a stripe cut into pieces along its length (a tail tip) keeps its label
-        ends = _segment_ends(c, seg, ~weak)  # (the continuations and _agree_along below run on this ``seg``)
+        ends = _segment_ends(c, seg, ~weak, by_segment)  # (the continuations and _agree_along below run on it)
         seg_label.update(_continue_along(c, rays, planes, seg, seg_label, fg_mask, set(fg_labels), link,
                                          0.25 * spacing_mm, lit, ends=ends))
         # a short segment that runs straight on from a long one of the animal takes its index
@@ -336,11 +339,13 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     labels[at[~depth_in_range(rays.take(at, axis=0), planes, labels[at], *params.depth_range_mm)]] = -1
     labels = _enforce_row_order(c, labels, order)
     if bg_planes is not None and from_above:
-        labels = _off_plane_background(rays, planes, seg, c.v, labels, bg_labels, bg_planes)
-    return Labels(labels, bg_planes, seg, int(weighed.sum()), int((weighed & (labels < 0)).sum()), shallow)
+        labels = _off_plane_background(rays, planes, seg, c.v, labels, bg_labels, bg_planes, by_segment)
+    return Labels(labels, bg_planes, seg, int(weighed.sum()), int((weighed & (labels < 0)).sum()), shallow,
+                  by_segment)
 
 
-def _off_plane_background(rays, planes, seg, rows, labels, bg_labels: dict[int, int], bg_planes) -> np.ndarray:
+def _off_plane_background(rays, planes, seg, rows, labels, bg_labels: dict[int, int], bg_planes,
+                          order: np.ndarray | None = None) -> np.ndarray:
     """``labels`` (M,) without the end centres of background segments (``bg_labels``; their first and last
     ``OFF_PLANE_ENDS``, by ``rows`` (M,)) that lie more than ``OFF_PLANE`` times their nearest background
     plane's noise (``background.background_flatness``: the median distance of its labelled points, at least
@@ -358,15 +363,19 @@ def _off_plane_background(rays, planes, seg, rows, labels, bg_labels: dict[int, 
     moves. Weighing every centre of the segments instead of their ends: 12 571 wrong, but 4932 background
     centres unlabelled and 2-3 times the time; 4 or 6 times the noise (at least 1 mm): 11 906 or 12 103 wrong,
     118 861 or 24 270 background centres unlabelled; 15 times (at least 2 mm): 13 100 and 1251 (those
-    figures for every view direction)."""
+    figures for every view direction). ``order`` : ``segment_rows(seg, rows)``, when known."""
     is_bg = np.zeros(seg.max() + 1, bool)
     if bg_labels:
         is_bg[np.fromiter(bg_labels, np.int64, len(bg_labels))] = True
-    idx = np.flatnonzero((labels >= 0) & is_bg[seg])
-    if len(idx) == 0:
+    weigh = (labels >= 0) & is_bg[seg]
+    if not weigh.any():
         return labels
     # only a segment's first and last OFF_PLANE_ENDS centres are weighed: that is where the merges are
-    idx = idx[segment_rows(seg[idx], rows[idx])]
+    if order is None:
+        idx = np.flatnonzero(weigh)
+        idx = idx[segment_rows(seg[idx], rows[idx])]
+    else:  # the order of all the centres restricted to these is theirs
+        idx = order[weigh[order]]
     run = runs(seg[idx])
     count = np.diff(run)
     at = np.arange(len(idx)) - np.repeat(run[:-1], count)
@@ -713,12 +722,14 @@ class _Ends(NamedTuple):
     good: np.ndarray
 
 
-def _segment_ends(c: Centres, seg: np.ndarray, ok: np.ndarray | None = None) -> _Ends:
-    """``_Ends`` of the segments ``seg`` (M,); ``ok`` : ``detection.reliable(c)`` (M,), when known."""
+def _segment_ends(c: Centres, seg: np.ndarray, ok: np.ndarray | None = None, order: np.ndarray | None = None
+                  ) -> _Ends:
+    """``_Ends`` of the segments ``seg`` (M,); ``ok`` : ``detection.reliable(c)`` (M,), ``order`` :
+    ``segment_rows(seg, c.v)``, when known."""
     ok = reliable(c) if ok is None else ok
     n_seg = seg.max() + 1
     good = np.bincount(seg, weights=ok, minlength=n_seg) >= 0.6 * np.bincount(seg, minlength=n_seg)
-    order = segment_rows(seg, c.v)
+    order = segment_rows(seg, c.v) if order is None else order
     s_sorted = seg[order]
     bounds = runs(s_sorted)  # a segment each, top down
     sids = s_sorted[bounds[:-1]]
