@@ -60,11 +60,13 @@ def inlier_counts(sample, normals, offsets, tol_mm):
     the dot product summed x, y, z in order, so a point within a rounding of ``tol_mm`` may count
     differently than through BLAS)."""
     out = np.zeros(len(normals), np.int64)
+    # the points' columns apart: the loop over them runs on vector lanes (the same operations)
+    x, y, z = np.ascontiguousarray(sample[:, 0]), np.ascontiguousarray(sample[:, 1]), np.ascontiguousarray(sample[:, 2])
     for j in range(len(normals)):
         n0, n1, n2, d = normals[j, 0], normals[j, 1], normals[j, 2], offsets[j]
         count = 0
-        for i in range(len(sample)):
-            count += abs(sample[i, 0] * n0 + sample[i, 1] * n1 + sample[i, 2] * n2 - d) < tol_mm
+        for i in range(len(x)):
+            count += abs(x[i] * n0 + y[i] * n1 + z[i] * n2 - d) < tol_mm
         out[j] = count
     return out
 
@@ -102,3 +104,4 @@ def first_of_each(values, size):
             ids[g], pos[g] = s, first[s]
             g += 1
     return ids, pos
+
