@@ -22,6 +22,7 @@ def near_any_plane(rays, planes, bg_planes, tol_mm, near):
     p0, p1 = np.ascontiguousarray(planes[:, 0]), np.ascontiguousarray(planes[:, 1])
     p2, p3 = np.ascontiguousarray(planes[:, 2]), np.ascontiguousarray(planes[:, 3])
     d, z = np.empty(n), np.empty(n)
+    bad = np.empty(n, np.bool_)
     for i in range(m):
         r0, r1, r2 = rays[i, 0], rays[i, 1], rays[i, 2]
         for k in range(n):
@@ -29,14 +30,23 @@ def near_any_plane(rays, planes, bg_planes, tol_mm, near):
             d[k] = np.inf
         for b in range(len(bg_planes)):
             along = r0 * bg_planes[b, 0] + r1 * bg_planes[b, 1] + r2 * bg_planes[b, 2]
+            off = bg_planes[b, 3]
             for k in range(n):
-                g = abs(z[k] * along - bg_planes[b, 3])
+                g = abs(z[k] * along - off)
                 d[k] = g if g < d[k] else d[k]  # NaN skipped, as np.fmin skips it
+        # the answers and the unsure flags without a branch (vector lanes), the rare unsure ones listed after
+        row = near[i]
+        n_bad = 0
         for k in range(n):
-            near[i, k] = d[k] < tol_mm
-            if not (abs(d[k] - tol_mm) > 1e-6 and abs(z[k]) < 1e8):
-                unsure[u] = i * n + k
-                u += 1
+            row[k] = d[k] < tol_mm
+            flag = not ((abs(d[k] - tol_mm) > 1e-6) & (abs(z[k]) < 1e8))
+            bad[k] = flag
+            n_bad += flag
+        if n_bad:
+            for k in range(n):
+                if bad[k]:
+                    unsure[u] = i * n + k
+                    u += 1
     return unsure[:u]
 
 
