@@ -164,8 +164,8 @@ def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray,
 
     The distance is |(ray z) . n - d|. It is screened as |z (ray . n) - d| (no (m, N, 3) points), which
     differs only by rounding; where that lies within a hair of ``tol_mm`` the points are formed after
-    all, so the answer is the one the exact formula gives (with ``depth_for_labels``' depths of the
-    ``chunk`` rays, formed only for a chunk that has such a case)."""
+    all, so the answer is the one the exact formula gives (with ``depth_for_labels``' depths of the rays
+    that have such a case)."""
     normals = np.ascontiguousarray(bg_planes[:, :3].T)  # (3, P)
     out = np.empty((len(rays), len(planes)), bool)
 
@@ -175,8 +175,11 @@ def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray,
             unsure = _kernels.near_any_plane(r, planes, bg_planes, tol_mm, out[a:a + chunk])
             if len(unsure):
                 i, k = np.divmod(unsure, len(planes))
-                z = depth_for_labels(r, planes)
-                out[a + i, k] = _near_exact(r[i] * z[i, k][:, None], normals, bg_planes[:, 3], tol_mm)
+                # the depths of the rays with an unsure pair only (each row of depth_for_labels comes out
+                # the same whichever rows share the call): a ray or two of the chunk, not all of it
+                rows, at = np.unique(i, return_inverse=True)
+                z = depth_for_labels(r.take(rows, axis=0), planes)[at, k]
+                out[a + i, k] = _near_exact(r[i] * z[:, None], normals, bg_planes[:, 3], tol_mm)
 
     starts = range(0, len(rays), chunk)
     if len(starts) < 4:
