@@ -14,17 +14,23 @@ from .triangulation import depth_for_labels, intersect
 
 
 def background_planes(rays: np.ndarray, planes: np.ndarray, labels: np.ndarray, tol_mm: float = 8.0,
-                       max_planes: int = 4, first_share: float = 0.2, next_share: float = 0.1) -> np.ndarray | None:
+                       max_planes: int = 4, first_share: float = 0.2, next_share: float = 0.1,
+                       points: np.ndarray | None = None) -> np.ndarray | None:
     """The dominant planes (floor, wall) of the labelled cloud, (P, 4); None when no plane carries
     ``first_share`` of it (no planar background to separate from). A further plane needs ``next_share``:
     with a noisy sensor the floor's rows are labelled far less often than the wall's. Up to four: a
-    weighing platform adds its front and its top to the wall and the floor."""
+    weighing platform adds its front and its top to the wall and the floor.
+    ``points`` : (M, 3) mm, each centre's point on its label's plane where it has one
+    (``intersect(rays, planes[labels])``, ray by ray), when known."""
     from .planes import fit_plane_robust
 
     idx = np.nonzero(labels >= 0)[0]
     if len(idx) < 200:
         return None
-    pts = intersect(rays.take(idx, axis=0), planes.take(labels[idx], axis=0))
+    if points is None:
+        pts = intersect(rays.take(idx, axis=0), planes.take(labels[idx], axis=0))
+    else:
+        pts = points.take(idx, axis=0)
     found: list[np.ndarray] = []
     rest = np.ones(len(idx), bool)
     rng = np.random.default_rng(0)
@@ -158,8 +164,8 @@ def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray,
 
     The distance is |(ray z) . n - d|. It is screened as |z (ray . n) - d| (no (m, N, 3) points), which
     differs only by rounding; where that lies within a hair of ``tol_mm`` the points are formed after
-    all, so the answer is the one the exact formula gives (with ``depth_for_labels``' depths of the
-    ``chunk`` rays, formed only for a chunk that has such a case)."""
+    all, so the answer is the one the exact formula gives (with ``depth_for_labels``' depths of the rays
+    that have such a case)."""
     normals = np.ascontiguousarray(bg_planes[:, :3].T)  # (3, P)
     out = np.empty((len(rays), len(planes)), bool)
 
@@ -169,8 +175,11 @@ def _near_any_plane(rays: np.ndarray, planes: np.ndarray, bg_planes: np.ndarray,
             unsure = _kernels.near_any_plane(r, planes, bg_planes, tol_mm, out[a:a + chunk])
             if len(unsure):
                 i, k = np.divmod(unsure, len(planes))
-                z = depth_for_labels(r, planes)
-                out[a + i, k] = _near_exact(r[i] * z[i, k][:, None], normals, bg_planes[:, 3], tol_mm)
+                # the depths of the rays with an unsure pair only (each row of depth_for_labels comes out
+                # the same whichever rows share the call): a ray or two of the chunk, not all of it
+                rows, at = np.unique(i, return_inverse=True)
+                z = depth_for_labels(r.take(rows, axis=0), planes)[at, k]
+                out[a + i, k] = _near_exact(r[i] * z[:, None], normals, bg_planes[:, 3], tol_mm)
 
     starts = range(0, len(rays), chunk)
     if len(starts) < 4:

@@ -30,8 +30,8 @@ FLOOR_STOP_MM = 5.0
 
 
 def faint_ends(c: Centres, labels: np.ndarray, segment: np.ndarray, cloud: np.ndarray, scene: np.ndarray,
-               faint: Centres, link_px: float, image_rows: int, over_background: bool = False
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+               faint: Centres, link_px: float, image_rows: int, over_background: bool = False,
+               order: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The rows past each animal segment's ends that its stripe still crosses: u (E,) float64 and v (E,)
     int64 pixels and the stripe index (E,) of each, and the walk (E,) int64 it came from (its points in
     order, from the segment's end outward).
@@ -42,6 +42,7 @@ def faint_ends(c: Centres, labels: np.ndarray, segment: np.ndarray, cloud: np.nd
     faint : the faint peaks of the same image
     link_px : largest column change per row from the stripe's course (its slope over the last rows)
     over_background : the scene's points off the animal (the floor's and wall's) may be stepped on too
+    order : ``segments.segment_rows(segment, c.v)`` (M,), when known (``cloud`` then ascending)
 
     A step goes to the nearest peak in the next row (or up to ``ROW_GAP`` on) within ``link_px`` of where the
     stripe's course leads: a faint peak or a centre with no label or with the walk's own, never one a
@@ -73,10 +74,15 @@ def faint_ends(c: Centres, labels: np.ndarray, segment: np.ndarray, cloud: np.nd
     pool_lab = np.r_[free_lab, np.full(len(faint), -1, np.int64)]
     span = 4.0 * (max(float(pool_u.max(initial=0.0)), float(c.u.max())) + link_px + 2.0)
     pool_key = pool_v * span + pool_u
-    order = np.argsort(pool_key, kind="stable")
-    pool_u, pool_v, pool_lab, pool_key = pool_u[order], pool_v[order], pool_lab[order], pool_key[order]
+    by_key = np.argsort(pool_key, kind="stable")
+    pool_u, pool_v, pool_lab, pool_key = pool_u[by_key], pool_v[by_key], pool_lab[by_key], pool_key[by_key]
     # each animal segment's two ends and the stripe's slope there (du/dv over the last SLOPE_ROWS rows)
-    by_seg = cloud[segment_rows(segment[cloud], c.v[cloud])]
+    if order is None:
+        by_seg = cloud[segment_rows(segment[cloud], c.v[cloud])]
+    else:  # the order of all the centres restricted to the cloud's (distinct, ascending) is theirs
+        in_cloud = np.zeros(len(c), bool)
+        in_cloud[cloud] = True
+        by_seg = order[in_cloud[order]]
     st = runs(segment[by_seg])
     first, last = by_seg[st[:-1]], by_seg[st[1:] - 1]
     near_first = by_seg[np.minimum(st[:-1] + SLOPE_ROWS, st[1:] - 1)]
@@ -122,19 +128,28 @@ def end_points(u: np.ndarray, v: np.ndarray, k: np.ndarray, walk: np.ndarray, ta
         # the walks' points are listed step by step: a point is kept while no earlier one of its walk was near
         # a background plane, and while it is no more than ``run_rows`` points into a run on one other light
         # plane's floor or wall stripe (where a stripe's end merges with that stripe, its last rows lie on
-        # both; past them only the floor's stripe goes on)
-        stopped = np.zeros(int(walk.max()) + 1, bool)
-        last_other = np.full(int(walk.max()) + 1, -1, np.int64)
-        run = np.zeros(int(walk.max()) + 1, np.int64)
-        for a, b in zip(*_step_bounds(walk), strict=True):
-            w = walk[a:b]
-            run[w] = np.where((other[a:b] >= 0) & (other[a:b] == last_other[w]), run[w] + 1,
-                              (other[a:b] >= 0).astype(np.int64))
-            end = near[a:b] | (run[w] > run_rows)
-            keep[a:b] &= ~stopped[w] & ~end
-            stopped[w[end]] = True
-            last_other[w] = other[a:b]
+        # both; past them only the floor's stripe goes on): one compiled pass (``walk_stops_numpy``, the
+        # NumPy form, is the reference)
+        _kernels.walk_stops(walk, near, other, run_rows, keep)
     return p, keep
+
+
+def walk_stops_numpy(walk: np.ndarray, near: np.ndarray, other: np.ndarray, run_rows: int, keep: np.ndarray
+                     ) -> np.ndarray:
+    """``_kernels.walk_stops`` step by step in NumPy (its reference): clears ``keep`` (E,) past each walk's
+    stop."""
+    stopped = np.zeros(int(walk.max()) + 1, bool)
+    last_other = np.full(int(walk.max()) + 1, -1, np.int64)
+    run = np.zeros(int(walk.max()) + 1, np.int64)
+    for a, b in zip(*_step_bounds(walk), strict=True):
+        w = walk[a:b]
+        run[w] = np.where((other[a:b] >= 0) & (other[a:b] == last_other[w]), run[w] + 1,
+                          (other[a:b] >= 0).astype(np.int64))
+        end = near[a:b] | (run[w] > run_rows)
+        keep[a:b] &= ~stopped[w] & ~end
+        stopped[w[end]] = True
+        last_other[w] = other[a:b]
+    return keep
 
 
 def _step_bounds(walk: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

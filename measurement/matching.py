@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -221,6 +222,7 @@ class Labels:
     unplaced   : of those, centres left without one (no evidence fixed the piece's absolute index)
     faint_shadow : the animal's first piece was placed from a shallow conflict ramp (its shadow's lit edge
                  mostly hidden): right on 3 of 4 such renders, but weaker evidence than usual
+    segment_order : (M,) the centres by segment, then row (``segments.segment_rows(segment, v)``), or None
     """
 
     stripe: np.ndarray
@@ -229,6 +231,7 @@ class Labels:
     pieces: int = 0
     unplaced: int = 0
     faint_shadow: bool = False
+    segment_order: np.ndarray | None = None
 
 
 def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], planes: np.ndarray,
@@ -260,10 +263,11 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     labels = _labels_of(seg, seg_label, long_seg)
     # 2: a stripe that continued across the animal's outline in the image carried a background index
     # onto the animal; such centres sit off the background surfaces: cut them off as foreground
-    bg_planes = background_planes(rays, planes, labels)
+    on_label = intersect(rays, planes.take(np.clip(labels, 0, n - 1), axis=0))  # (M, 3) mm, read where labelled
+    bg_planes = background_planes(rays, planes, labels, points=on_label)
     complete = labels  # the complete rows' labels: where a plane before a parallel one was seen
     if bg_planes is not None:
-        on_bg = near_planes(intersect(rays, planes.take(np.clip(labels, 0, n - 1), axis=0)), bg_planes) & (labels >= 0)
+        on_bg = near_planes(on_label, bg_planes) & (labels >= 0)
         off_bg = foreground_mask(c, seg, labels, on_bg)
         # the foreground is re-linked on the second core; the stripe spacing needs only the labels kept
         relinked = second_core().submit(relink_foreground, c, seg, labels, off_bg, link, params.min_segment_rows)
@@ -272,6 +276,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     else:
         spacing_mm = _stripe_spacing_mm(c, rays, planes, seg, seg_label, left)
     tol = spacing_mm * params.continuity
+    by_segment = segment_rows(seg, c.v)  # the centres by segment, then row: ``seg`` is final from here on
     # 3: the background grows over its own surfaces; a segment joins it only if it then lies on them
     pairs = _neighbour_pairs(seg, long_seg, left, right)  # every growth below takes its centres' share
     _grow_all(c, rays, planes, seg, seg_label, long_seg, left, right, 1.7 * spacing_mm, n, bg_planes, pairs=pairs)
@@ -302,14 +307,17 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
                   gaps=(1,), min_share=0.8, slope=True, pairs=fg_pairs)
     seg_label.update(fg_labels)
     if fg_labels:  # a stripe cut into pieces along its length (a tail tip) keeps its label
+        ends = _segment_ends(c, seg, ~weak, by_segment)  # (the continuations and _agree_along below run on it)
         seg_label.update(_continue_along(c, rays, planes, seg, seg_label, fg_mask, set(fg_labels), link,
-                                         0.25 * spacing_mm, lit))
+                                         0.25 * spacing_mm, lit, ends=ends))
         # a short segment that runs straight on from a long one of the animal takes its index
-        fixed = _agree_along(c, rays, planes, seg, seg_label, set(seg_label) - set(bg_labels), 0.25 * spacing_mm)
+        fixed = _agree_along(c, rays, planes, seg, seg_label, set(seg_label) - set(bg_labels), 0.25 * spacing_mm,
+                             ends)
         if fixed:
             seg_label.update(fixed)
             seg_label.update(_continue_along(c, rays, planes, seg, seg_label, fg_mask,
-                                             set(seg_label) - set(bg_labels), link, 0.25 * spacing_mm, lit))
+                                             set(seg_label) - set(bg_labels), link, 0.25 * spacing_mm, lit,
+                                             ends=ends))
     if fg_labels and small:  # isolated small pieces (a head seen from above) hemmed in by what is placed
         seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit, table,
                                       anchor=from_above))
@@ -347,11 +355,13 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     else:
         labels = _enforce_row_order(c, labels, order)
     if bg_planes is not None and from_above:
-        labels = _off_plane_background(rays, planes, seg, c.v, labels, bg_labels, bg_planes)
-    return Labels(labels, bg_planes, seg, int(weighed.sum()), int((weighed & (labels < 0)).sum()), shallow)
+        labels = _off_plane_background(rays, planes, seg, c.v, labels, bg_labels, bg_planes, by_segment)
+    return Labels(labels, bg_planes, seg, int(weighed.sum()), int((weighed & (labels < 0)).sum()), shallow,
+                  by_segment)
 
 
-def _off_plane_background(rays, planes, seg, rows, labels, bg_labels: dict[int, int], bg_planes) -> np.ndarray:
+def _off_plane_background(rays, planes, seg, rows, labels, bg_labels: dict[int, int], bg_planes,
+                          order: np.ndarray | None = None) -> np.ndarray:
     """``labels`` (M,) without the end centres of background segments (``bg_labels``; their first and last
     ``OFF_PLANE_ENDS``, by ``rows`` (M,)) that lie more than ``OFF_PLANE`` times their nearest background
     plane's noise (``background.background_flatness``: the median distance of its labelled points, at least
@@ -369,15 +379,19 @@ def _off_plane_background(rays, planes, seg, rows, labels, bg_labels: dict[int, 
     moves. Weighing every centre of the segments instead of their ends: 12 571 wrong, but 4932 background
     centres unlabelled and 2-3 times the time; 4 or 6 times the noise (at least 1 mm): 11 906 or 12 103 wrong,
     118 861 or 24 270 background centres unlabelled; 15 times (at least 2 mm): 13 100 and 1251 (those
-    figures for every view direction)."""
+    figures for every view direction). ``order`` : ``segment_rows(seg, rows)``, when known."""
     is_bg = np.zeros(seg.max() + 1, bool)
     if bg_labels:
         is_bg[np.fromiter(bg_labels, np.int64, len(bg_labels))] = True
-    idx = np.flatnonzero((labels >= 0) & is_bg[seg])
-    if len(idx) == 0:
+    weigh = (labels >= 0) & is_bg[seg]
+    if not weigh.any():
         return labels
     # only a segment's first and last OFF_PLANE_ENDS centres are weighed: that is where the merges are
-    idx = idx[segment_rows(seg[idx], rows[idx])]
+    if order is None:
+        idx = np.flatnonzero(weigh)
+        idx = idx[segment_rows(seg[idx], rows[idx])]
+    else:  # the order of all the centres restricted to these is theirs
+        idx = order[weigh[order]]
     run = runs(seg[idx])
     count = np.diff(run)
     at = np.arange(len(idx)) - np.repeat(run[:-1], count)
@@ -710,8 +724,41 @@ def _whole_animal_shift(c, rays, planes, seg, bg_cl, bg_lit, fg_labels, fg_mask,
     return int(shift)
 
 
+class _Ends(NamedTuple):
+    """The segments' centres top down and their ends, for ``_continue_along``: ``order`` (M,) the centres by
+    segment, then row (``segment_rows``); ``bounds`` (R + 1,) the runs of ``order``, a segment each;
+    ``sid_run`` (S,) each segment's run (-1 for none); ``first``, ``last`` (S,) its top and bottom centre
+    (-1 for none); ``good`` (S,) whether at least 0.6 of its centres are reliable peaks."""
+
+    order: np.ndarray
+    bounds: np.ndarray
+    sid_run: np.ndarray
+    first: np.ndarray
+    last: np.ndarray
+    good: np.ndarray
+
+
+def _segment_ends(c: Centres, seg: np.ndarray, ok: np.ndarray | None = None, order: np.ndarray | None = None
+                  ) -> _Ends:
+    """``_Ends`` of the segments ``seg`` (M,); ``ok`` : ``detection.reliable(c)`` (M,), ``order`` :
+    ``segment_rows(seg, c.v)``, when known."""
+    ok = reliable(c) if ok is None else ok
+    n_seg = seg.max() + 1
+    good = np.bincount(seg, weights=ok, minlength=n_seg) >= 0.6 * np.bincount(seg, minlength=n_seg)
+    order = segment_rows(seg, c.v) if order is None else order
+    s_sorted = seg[order]
+    bounds = runs(s_sorted)  # a segment each, top down
+    sids = s_sorted[bounds[:-1]]
+    sid_run = np.full(n_seg, -1)
+    sid_run[sids] = np.arange(len(sids))  # each segment's run in ``order``
+    first = np.full(n_seg, -1)
+    last = np.full(n_seg, -1)
+    first[sids], last[sids] = order[bounds[:-1]], order[bounds[1:] - 1]
+    return _Ends(order, bounds, sid_run, first, last, good)
+
+
 def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px, tol_mm,
-                    lit: np.ndarray | None = None, rounds: int = 6) -> dict[int, int]:
+                    lit: np.ndarray | None = None, rounds: int = 6, ends: _Ends | None = None) -> dict[int, int]:
     """Labels for unlabelled segments in ``mask`` (M,) that continue a labelled animal segment (in
     ``animal``) along its stripe: one starts one to four rows below where the other ends (or ends above
     where it starts), within ``link_px`` columns (times the rows of the gap beyond the first), and on
@@ -722,25 +769,17 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
     centres are mostly reliable peaks continue a stripe: the fur's stray specks beside a stripe's end are
     one-sided or wide. With the ``lit`` projector cells (``lit_cells``) a segment that would put more than
     a quarter of its cells on lit background does not continue the stripe either: something else lit those
-    projector rays."""
+    projector rays. ``ends`` : the ``_segment_ends`` of ``seg``, when known (two calls on one ``seg`` share
+    them)."""
     out: dict[int, int] = {}
     table = label_table(seg, seg_label)
-    good = np.bincount(seg, weights=reliable(c), minlength=seg.max() + 1) >= 0.6 * np.bincount(
-        seg, minlength=seg.max() + 1)
-    order = segment_rows(seg, c.v)
-    s_sorted = seg[order]
-    bounds = runs(s_sorted)  # a segment each, top down
-    sids = s_sorted[bounds[:-1]]
-    sid_run = np.full(seg.max() + 1, -1)
-    sid_run[sids] = np.arange(len(sids))  # each segment's run in ``order``
-    first = np.full(seg.max() + 1, -1)
-    last = np.full(seg.max() + 1, -1)
-    first[sids], last[sids] = order[bounds[:-1]], order[bounds[1:] - 1]
+    order, bounds, sid_run, first, last, good = _segment_ends(c, seg) if ends is None else ends
     in_mask = np.zeros(seg.max() + 1, bool)
     in_mask[seg[mask]] = True
     is_animal = np.zeros(seg.max() + 1, bool)
     is_animal[np.fromiter(animal, np.int64, len(animal))] = True
     span = 4.0 * (float(c.u.max()) + link_px + 1.0)  # row key stride: wider than any column plus the link
+    shares: dict[tuple[int, int], float] = {}  # (segment, label) -> ``_lit_share``
     for _ in range(rounds):
         done: dict[int, int] = {}
         src = np.flatnonzero(is_animal & (table >= 0))
@@ -769,8 +808,12 @@ def _continue_along(c, rays, planes, seg, seg_label, mask, animal: set, link_px,
                     near = np.abs(depth_on(rays.take(a[ai], axis=0), planes.take(k, axis=0))
                                   - depth_on(rays.take(b[bi], axis=0), planes.take(k, axis=0))) < tol_mm
                     for sid, lab in zip(dst[bi][near].tolist(), k[near].tolist(), strict=True):
-                        if sid not in done and _lit_share(rays, planes, order[bounds[sid_run[sid]]:bounds[sid_run[sid] + 1]],
-                                                          lab, lit) <= 0.25:
+                        if sid in done:
+                            continue
+                        if (sid, lab) not in shares:  # (``lit`` is fixed: a pair weighed once is known)
+                            shares[sid, lab] = _lit_share(rays, planes,
+                                                          order[bounds[sid_run[sid]]:bounds[sid_run[sid] + 1]], lab, lit)
+                        if shares[sid, lab] <= 0.25:
                             done[sid] = lab
         if not done:
             break
@@ -784,7 +827,7 @@ AGREE_PX = 1.0  # a segment that starts this close (columns) to where another en
 AGREE_SHORT = 30  # segments under this many centres take the index of the one they go on from
 
 
-def _agree_along(c, rays, planes, seg, seg_label, animal: set, tol_mm) -> dict[int, int]:
+def _agree_along(c, rays, planes, seg, seg_label, animal: set, tol_mm, ends: _Ends | None = None) -> dict[int, int]:
     """New labels for short labelled segments (under ``AGREE_SHORT`` centres) that go straight on from a
     long segment of the ``animal`` (the next row, within ``AGREE_PX`` columns, at least twice as long and
     ``AGREE_SHORT`` long, and within ``tol_mm`` in depth on its light plane) but carry another index: they
@@ -795,15 +838,19 @@ def _agree_along(c, rays, planes, seg, seg_label, animal: set, tol_mm) -> dict[i
     or grown into the floor's labels (a gamma-encoded render's 40-stripe fur side view: stripe 13's last 40
     rows, the height −8.1 %; −2.2 % with this). On the 272 cached views: 1396 more of the animal's centres
     right, 425 fewer wrong, 291 more background centres wrong, no view's placement moved, heights within
-    1 % 76 → 77; the five seeds' heights 23 → 24 of 40 (a 50-stripe clean side view +1.17 → +0.10 %)."""
+    1 % 76 → 77; the five seeds' heights 23 → 24 of 40 (a 50-stripe clean side view +1.17 → +0.10 %).
+    ``ends`` : the ``_segment_ends`` of ``seg``, when known (its order holds the labelled segments' too)."""
     if len(seg_label) < 2 or not animal:
         return {}
     labelled = np.zeros(seg.max() + 1, bool)
     labelled[np.fromiter(seg_label, np.int64, len(seg_label))] = True
     fg = np.zeros(seg.max() + 1, bool)
     fg[np.fromiter(animal, np.int64, len(animal))] = True
-    member = np.flatnonzero(labelled[seg])
-    order = member[segment_rows(seg[member], c.v[member])]
+    if ends is None:
+        member = np.flatnonzero(labelled[seg])
+        order = member[segment_rows(seg[member], c.v[member])]
+    else:  # the same order: that of all the centres, restricted to the labelled segments'
+        order = ends.order[labelled[seg[ends.order]]]
     bounds = runs(seg[order])
     sids = seg[order[bounds[:-1]]]
     first, last = order[bounds[:-1]], order[bounds[1:] - 1]

@@ -123,7 +123,8 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     cells = looked_up[1] if looked_up else rays_and_cells(centres.u, centres.v, table)[1]
     t["match"] = time.perf_counter()
     seg_ids = labels.segment if labels.segment is not None else np.arange(len(centres))
-    smooth_u, ok = smooth_along_segments(centres, seg_ids, labels.stripe)
+    by_segment = labels.segment_order if labels.segment is not None else None  # (segment_rows of seg_ids)
+    smooth_u, ok = smooth_along_segments(centres, seg_ids, labels.stripe, order=by_segment)
     smoothed = ok.copy()
     # one-sided peaks and stripes widened at a grazing outline helped link and label their stripe, but
     # their position is off by 1.5-5 px: they stay out of the cloud
@@ -152,7 +153,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     if faint is not None and len(animal_pts):
         eu, ev, ek, ew = faint_ends(centres, labels.stripe, seg_ids, idx[animal], idx, faint,
                                     params.matching.link_px * max(image.shape[1] / 3072.0, 0.5), image.shape[0],
-                                    over_background=view == "top")
+                                    over_background=view == "top", order=by_segment)
         if len(eu):
             ep, keep = end_points(eu, ev, ek, ew, table, calibration.planes, labels.background,
                                   max(margin, FLOOR_STOP_MM), max(1, round(MERGE_ROWS * image.shape[0] / 2048)))

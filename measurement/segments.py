@@ -106,19 +106,23 @@ def row_neighbours(c: Centres, order: np.ndarray | None = None) -> tuple[np.ndar
 
 
 def smooth_along_segments(c: Centres, segment: np.ndarray, labels: np.ndarray, half: int = 2,
-                          outlier_px: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+                          outlier_px: float = 1.0, order: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Average each centre's column with its neighbours along its stripe segment (+-``half`` rows; the
     surface is smooth over a couple of millimetres along a stripe, fur noise is not) and flag centres
     more than ``outlier_px`` off the median of their neighbourhood (specks of scattered light).
 
+    order : ``segment_rows(segment, c.v)`` (M,), when known
     returns : smoothed u (M,) float64, keep mask (M,) bool
     """
     u = c.u.copy()
     keep = labels >= 0
-    idx = np.nonzero(keep)[0]
-    if len(idx) == 0:
+    if not keep.any():
         return u, keep
-    order = idx[segment_rows(segment[idx], c.v[idx])]
+    if order is None:
+        idx = np.nonzero(keep)[0]
+        order = idx[segment_rows(segment[idx], c.v[idx])]
+    else:  # the order of all the centres restricted to the labelled ones is theirs
+        order = order[keep[order]]
     _kernels.smooth_runs(order, runs(segment[order]), c.u, half, outlier_px, u, keep)
     return u, keep
 

@@ -272,3 +272,22 @@ def test_union_sorted_merges_as_the_sort_of_both_does():
         b = np.unique(np.concatenate([rng.integers(0, 5000, nb), a[: len(a) // 3]])).astype(np.int64)
         reference = np.sort(np.concatenate([a, b[~in_sorted(b, a)]]), kind="stable")
         assert np.array_equal(union_sorted(a, b), reference) and np.array_equal(reference, np.union1d(a, b))
+
+
+def test_walk_stops_clear_what_the_numpy_steps_clear():
+    from measurement.ends import walk_stops_numpy
+
+    rng = np.random.default_rng(5)
+    for _ in range(30):
+        # walks listed step by step: each step a random ascending subset of the surviving walks
+        n_w, walk = int(rng.integers(1, 12)), []
+        alive = np.arange(n_w)
+        while len(alive):
+            alive = np.sort(rng.choice(alive, int(rng.integers(0, len(alive) + 1)), replace=False))
+            walk.extend(alive.tolist())
+        walk = np.array(walk, np.int64)
+        near = rng.random(len(walk)) < 0.1
+        other = np.where(rng.random(len(walk)) < 0.6, rng.integers(0, 3, len(walk)), -1).astype(np.int64)
+        keep = rng.random(len(walk)) < 0.95
+        want = walk_stops_numpy(walk, near, other, 2, keep.copy()) if len(walk) else keep
+        assert np.array_equal(_kernels.walk_stops(walk, near, other, 2, keep.copy()), want)

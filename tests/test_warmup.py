@@ -15,7 +15,7 @@ from tests.backend_support import settings_for
 ROOT = Path(__file__).resolve().parents[1]
 # kernels on every step of a scan: detection, matching (growth, pieces, offsets), triangulation, measurement
 KERNELS = ("first_peaks", "refine_peaks", "link_components", "grow_piece", "distinct_cells", "gap_votes",
-           "grow_by_slope", "cloud_points", "group_extents", "walk_ends", "group_extent_with")
+           "grow_by_slope", "cloud_points", "group_extents", "walk_ends", "group_extent_with", "walk_stops")
 
 
 def test_warm_up_compiles_the_kernels_of_every_scan_step_in_a_fresh_process():

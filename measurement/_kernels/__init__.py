@@ -42,6 +42,7 @@ from .segments import (
     smooth_runs,
     stable_group_order,
     walk_ends,
+    walk_stops,
 )
 
 __all__ = [
@@ -90,4 +91,5 @@ __all__ = [
     "voting_pairs",
     "voxel_cells",
     "walk_ends",
+    "walk_stops",
 ]

@@ -22,6 +22,7 @@ def near_any_plane(rays, planes, bg_planes, tol_mm, near):
     p0, p1 = np.ascontiguousarray(planes[:, 0]), np.ascontiguousarray(planes[:, 1])
     p2, p3 = np.ascontiguousarray(planes[:, 2]), np.ascontiguousarray(planes[:, 3])
     d, z = np.empty(n), np.empty(n)
+    bad = np.empty(n, np.bool_)
     for i in range(m):
         r0, r1, r2 = rays[i, 0], rays[i, 1], rays[i, 2]
         for k in range(n):
@@ -29,14 +30,23 @@ def near_any_plane(rays, planes, bg_planes, tol_mm, near):
             d[k] = np.inf
         for b in range(len(bg_planes)):
             along = r0 * bg_planes[b, 0] + r1 * bg_planes[b, 1] + r2 * bg_planes[b, 2]
+            off = bg_planes[b, 3]
             for k in range(n):
-                g = abs(z[k] * along - bg_planes[b, 3])
+                g = abs(z[k] * along - off)
                 d[k] = g if g < d[k] else d[k]  # NaN skipped, as np.fmin skips it
+        # the answers and the unsure flags without a branch (vector lanes), the rare unsure ones listed after
+        row = near[i]
+        n_bad = 0
         for k in range(n):
-            near[i, k] = d[k] < tol_mm
-            if not (abs(d[k] - tol_mm) > 1e-6 and abs(z[k]) < 1e8):
-                unsure[u] = i * n + k
-                u += 1
+            row[k] = d[k] < tol_mm
+            flag = not ((abs(d[k] - tol_mm) > 1e-6) & (abs(z[k]) < 1e8))
+            bad[k] = flag
+            n_bad += flag
+        if n_bad:
+            for k in range(n):
+                if bad[k]:
+                    unsure[u] = i * n + k
+                    u += 1
     return unsure[:u]
 
 
@@ -60,11 +70,13 @@ def inlier_counts(sample, normals, offsets, tol_mm):
     the dot product summed x, y, z in order, so a point within a rounding of ``tol_mm`` may count
     differently than through BLAS)."""
     out = np.zeros(len(normals), np.int64)
+    # the points' columns apart: the loop over them runs on vector lanes (the same operations)
+    x, y, z = np.ascontiguousarray(sample[:, 0]), np.ascontiguousarray(sample[:, 1]), np.ascontiguousarray(sample[:, 2])
     for j in range(len(normals)):
         n0, n1, n2, d = normals[j, 0], normals[j, 1], normals[j, 2], offsets[j]
         count = 0
-        for i in range(len(sample)):
-            count += abs(sample[i, 0] * n0 + sample[i, 1] * n1 + sample[i, 2] * n2 - d) < tol_mm
+        for i in range(len(x)):
+            count += abs(x[i] * n0 + y[i] * n1 + z[i] * n2 - d) < tol_mm
         out[j] = count
     return out
 
@@ -102,3 +114,4 @@ def first_of_each(values, size):
             ids[g], pos[g] = s, first[s]
             g += 1
     return ids, pos
+

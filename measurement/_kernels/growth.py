@@ -228,11 +228,15 @@ def gapped_rows(u, order, m, n, window, slack, labels):
     win = np.empty(window)
     for row in range(len(order) // m):
         at = order[row * m:(row + 1) * m]
+        ok = True
         for j in range(m - 1):
             gaps[j] = u[at[j + 1]] - u[at[j]]
-        ok = True
+            ok &= gaps[j] > 2
         total = 0.0
+        # a row that fails a test gets no labels: it is left at its first failure (the same rows pass)
         for j in range(m - 1):
+            if not ok:
+                break
             for t in range(window):  # an insertion sort: a handful of values
                 g = gaps[min(max(j - pad + t, 0), m - 2)]
                 q = t
@@ -246,6 +250,8 @@ def gapped_rows(u, order, m, n, window, slack, labels):
             total += k[j]
             ok &= k[j] >= 1 and k[j] <= 2 and abs(r[j] - k[j]) < slack and gaps[j] > 2
         for j in range(m - 2):
+            if not ok:
+                break
             ratio = per[j + 1] / max(per[j], 1e-6)
             ok &= ratio > 0.7 and ratio < 1.43
         if ok and total == n - 1:

@@ -386,3 +386,30 @@ def walk_ends(pool_key, pool_u, pool_v, pool_lab, span, u, v, slope, step, lab, 
                 taken[best[w]] = True
                 claim[best[w]] = -1
     return out_u[:e], out_v[:e], out_k[:e], out_w[:e]
+
+
+@compiled
+def walk_stops(walk, near, other, run_rows, keep):
+    """``ends.end_points``' stops: along the walks' points (E,) listed step by step (``walk`` (E,) the walk of
+    each; within a step every walk at most once), clears ``keep`` (E,) bool from the first point ``near``
+    (E,) a background plane on, and from the point ``run_rows`` + 1 into a run of points that one other
+    light plane ``other`` (E,) (-1: none) puts on a background plane. Point by point in order: the same as
+    the NumPy form step by step, since no walk appears twice in a step."""
+    if len(walk) == 0:
+        return keep
+    n_w = walk.max() + 1
+    stopped = np.zeros(n_w, np.bool_)
+    last_other = np.full(n_w, -1, np.int64)
+    run = np.zeros(n_w, np.int64)
+    for j in range(len(walk)):
+        w, o = walk[j], other[j]
+        if o >= 0 and o == last_other[w]:
+            run[w] += 1
+        else:
+            run[w] = 1 if o >= 0 else 0
+        end = near[j] or run[w] > run_rows
+        keep[j] = keep[j] and not stopped[w] and not end
+        if end:
+            stopped[w] = True
+        last_other[w] = o
+    return keep
