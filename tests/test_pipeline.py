@@ -430,18 +430,13 @@ def test_a_top_view_s_body_width_reads_the_stripes_faint_ends_at_the_flank(tmp_p
     came out 3.0 % short of the same definition on the true stripe points. Followed over the faint peaks
     past their last centres (``measurement.ends``), the stripes measure it 1.0 % short; the cloud is the
     same point for point (the faint ends stay out of it)."""
-    from measurement.body import measure
     from measurement.pipeline import ScanParams
     from measurement.simulate.capture import write_capture
 
     cap = write_capture(tmp_path / "top", stripes=40, size=(1536, 1024), seed=12, fur=False, scenes=("top",), poses=0)
-    cal = load_calibration(cap / "truth" / "truth.json")
-    img = read_image(cap / "scan" / "top.png")
+    cal, img, t, ref = _view_and_truth(cap, "top")
     plain = scan(img, cal, "top", params=ScanParams(faint_ends=False))
     ended = scan(img, cal, "top")
-    t = dict(np.load(cap / "truth" / "top_stripes.npz"))
-    on = t["kind"] == 5
-    ref = measure(t["points"][on], t["stripe"][on], np.rint(t["uv"][on, 1]).astype(np.int64), "top")
     short = abs(plain.measurements["body_height_mm"] / ref["body_height_mm"] - 1)
     now = abs(ended.measurements["body_height_mm"] / ref["body_height_mm"] - 1)
     assert short > 0.02 and now < 0.015 and now < 0.5 * short
@@ -457,16 +452,11 @@ def test_seen_from_above_a_stripe_end_is_followed_over_the_floor_stripe_it_merge
     Stepping over the floor's points as well (three rows into such a merge at most) it is 2.3 % short;
     the cloud is the same point for point."""
     import measurement.pipeline as pipeline
-    from measurement.body import measure
     from measurement.simulate.capture import write_capture
 
     cap = write_capture(tmp_path / "top", stripes=40, size=(1536, 1024), seed=4, fur=True, scenes=("side", "top"),
                         poses=0)
-    cal = load_calibration(cap / "truth" / "truth.json")
-    img = read_image(cap / "scan" / "top.png")
-    t = dict(np.load(cap / "truth" / "top_stripes.npz"))
-    on = t["kind"] == 5
-    ref = measure(t["points"][on], t["stripe"][on], np.rint(t["uv"][on, 1]).astype(np.int64), "top")
+    cal, img, t, ref = _view_and_truth(cap, "top")
     over = scan(img, cal, "top")
     walk = pipeline.faint_ends
     monkeypatch.setattr(pipeline, "faint_ends", lambda *a, **k: walk(*a, **{**k, "over_background": False}))
@@ -485,16 +475,11 @@ def test_a_side_view_s_stripes_are_followed_down_the_hoof_to_5_mm_above_the_floo
     floor (``ends.FLOOR_STOP_MM``) the hoof's rows count and it is 0.8 % short; the cloud is the same point
     for point."""
     import measurement.pipeline as pipeline
-    from measurement.body import measure
     from measurement.simulate.capture import write_capture
 
     cap = write_capture(tmp_path / "side", stripes=40, size=(1536, 1024), seed=4, fur=True, scenes=("side",),
                         poses=0, light={"blur_px": 2.0})
-    cal = load_calibration(cap / "truth" / "truth.json")
-    img = read_image(cap / "scan" / "side.png")
-    t = dict(np.load(cap / "truth" / "side_stripes.npz"))
-    on = t["kind"] == 5
-    ref = measure(t["points"][on], t["stripe"][on], np.rint(t["uv"][on, 1]).astype(np.int64), "side")
+    cal, img, t, ref = _view_and_truth(cap, "side")
     down = scan(img, cal, "side")
     monkeypatch.setattr(pipeline, "FLOOR_STOP_MM", 12.0)
     stopped = scan(img, cal, "side")
@@ -514,7 +499,6 @@ def test_seen_from_above_a_tail_tip_beyond_the_last_labelled_stripe_takes_the_ne
     from dataclasses import replace
 
     import measurement.matching as matching
-    from measurement.body import measure
     from measurement.simulate.capture import write_capture
     from measurement.simulate.rig import Rig, default_rig
 
@@ -522,11 +506,7 @@ def test_seen_from_above_a_tail_tip_beyond_the_last_labelled_stripe_takes_the_ne
     dense = Rig(rig.intrinsics, replace(rig.projector, stripe_x=rig.projector.stripe_x * 0.7))
     cap = write_capture(tmp_path / "top", stripes=40, size=(1536, 1024), seed=4, fur=True, scenes=("side", "top"),
                         poses=0, rig=dense)
-    cal = load_calibration(cap / "truth" / "truth.json")
-    img = read_image(cap / "scan" / "top.png")
-    t = dict(np.load(cap / "truth" / "top_stripes.npz"))
-    on = t["kind"] == 5
-    ref = measure(t["points"][on], t["stripe"][on], np.rint(t["uv"][on, 1]).astype(np.int64), "top")
+    cal, img, t, ref = _view_and_truth(cap, "top")
     found: dict = {}
     tips = matching._tips
     monkeypatch.setattr(matching, "_tips", lambda *a, **k: found.update(tips(*a, **k)) or dict(found))
@@ -539,3 +519,14 @@ def test_seen_from_above_a_tail_tip_beyond_the_last_labelled_stripe_takes_the_ne
     tk, kind = match_crossings(tipped.uv.astype(float), t)
     new = np.isin(tipped.stripe, list(set(found.values()))) & (kind == 5) & (tk >= 0)
     assert new.sum() >= 10 and np.mean(tipped.stripe[new] == tk[new]) > 0.95
+
+
+def _view_and_truth(cap, view: str):
+    """A rendered capture's true calibration, the view's image, its true stripe crossings and the paper's
+    measurements on the true animal points (the figures a scan is held to)."""
+    from measurement.body import measure
+
+    t = dict(np.load(cap / "truth" / f"{view}_stripes.npz"))
+    on = t["kind"] == 5
+    ref = measure(t["points"][on], t["stripe"][on], np.rint(t["uv"][on, 1]).astype(np.int64), view)
+    return load_calibration(cap / "truth" / "truth.json"), read_image(cap / "scan" / f"{view}.png"), t, ref
