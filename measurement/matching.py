@@ -935,9 +935,11 @@ def _tips(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray, lon
         if not 0 <= k < n:
             continue
         mine = np.flatnonzero(animal == end)
-        # only centres within a few stripe periods of the end stripe's columns can be its neighbours
+        # only segments within a few stripe periods of the end stripe's columns can be its neighbours (whole)
         near = free_all & (c.u >= float(c.u[mine].min()) - reach) & (c.u <= float(c.u[mine].max()) + reach)
-        free = np.flatnonzero(near)
+        touched = np.zeros(seg.max() + 1, bool)
+        touched[seg[near]] = True
+        free = np.flatnonzero(free_all & touched[seg])
         if len(free) == 0:
             continue
         free = free[np.argsort(seg[free], kind="stable")]
