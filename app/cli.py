@@ -27,13 +27,25 @@ def _size(text: str) -> tuple[int, int]:
     return w, h
 
 
+def _gamma(text: str) -> float:
+    from measurement.capture import GAMMA_RANGE
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--gamma must be a number, got {text!r}") from None
+    if not GAMMA_RANGE[0] <= value <= GAMMA_RANGE[1]:
+        raise argparse.ArgumentTypeError(f"--gamma must be from {GAMMA_RANGE[0]} to {GAMMA_RANGE[1]}, got {text}")
+    return value
+
+
 def cmd_simulate(args: argparse.Namespace) -> None:
     from measurement.simulate.capture import write_capture
 
     scenes = tuple(s.strip() for s in args.scene.split(",")) if args.scene else ("side", "top")
     out = write_capture(
         Path(args.out_dir), stripes=args.stripes, size=args.size, seed=args.seed, scenes=scenes,
-        poses=args.poses, mesh=args.mesh, fur=not args.no_fur,
+        poses=args.poses, mesh=args.mesh, fur=not args.no_fur, gamma=args.gamma,
     )
     print(f"wrote capture to {out}")
 
@@ -94,6 +106,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--poses", type=int, default=12, help="calibration poses (default 12)")
     s.add_argument("--mesh", default=None, help="any trimesh-loadable animal mesh instead of the procedural quadruped")
     s.add_argument("--no-fur", action="store_true", help="smooth albedo, no scatter (clean scene)")
+    s.add_argument("--gamma", type=_gamma, default=1.0,
+                   help="write the images as a camera with this display gamma would (2.2: sRGB-like; rig.json says so)")
     s.set_defaults(func=cmd_simulate)
 
     c = sub.add_parser("calibrate", help="calibrate camera and light planes from a capture folder")

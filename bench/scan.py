@@ -40,6 +40,7 @@ from measurement.calibration import load_calibration  # noqa: E402
 from measurement.images import read_image  # noqa: E402
 from measurement.paper import gray_centres_literal  # noqa: E402
 from measurement.pipeline import scan  # noqa: E402
+from measurement.simulate.capture import display_encoded  # noqa: E402
 from measurement.simulate.truth import match_crossings  # noqa: E402
 
 ANIMAL = 5
@@ -64,18 +65,11 @@ def calibrated_for(cache: Path, stripes: int, size: tuple[int, int], poses: int 
     return load_calibration(result.to_dict())
 
 
-def gamma_encoded(img: np.ndarray, gamma: float) -> np.ndarray:
-    """The 8-bit image a renderer writing a display gamma would have written: 255 (v / vmax)^(1 / gamma)
-    of a linear frame (uint8 or uint16)."""
-    top = 65535.0 if img.dtype == np.uint16 else 255.0
-    return np.clip(np.rint(255.0 * (img.astype(np.float64) / top) ** (1.0 / gamma)), 0, 255).astype(np.uint8)
-
-
 def evaluate(cap: Path, view: str, ambient: bool = False, cal=None, gamma: float | None = None,
              linearise: bool = False) -> dict:
     """The figures of one view; with ``ambient``, scanned with its stripes-off image too; ``cal`` : the
     calibration to scan with (default: the simulator's true one); with ``gamma``, the images encoded with
-    that display gamma (``gamma_encoded``), and with ``linearise`` the calibration's ``camera_gamma`` set to it."""
+    that display gamma (``display_encoded``), and with ``linearise`` the calibration's ``camera_gamma`` set to it."""
     cal = cal or load_calibration(cap / "truth" / "truth.json")
     if gamma and linearise:
         cal = replace(cal, gamma=gamma)
@@ -83,7 +77,7 @@ def evaluate(cap: Path, view: str, ambient: bool = False, cal=None, gamma: float
 
     def image(name: str) -> np.ndarray:
         img = read_image(cap / "scan" / name)
-        return gamma_encoded(img, gamma) if gamma else img
+        return display_encoded(img, gamma) if gamma else img
 
     r = scan(image(f"{view}.png"), cal, view, ambient=image(f"{view}_ambient.png") if ambient else None)
     t = dict(np.load(cap / "truth" / f"{view}_stripes.npz"))

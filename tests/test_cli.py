@@ -25,6 +25,38 @@ def test_simulate_then_calibrate_writes_calibration_json_and_report(tmp_path):
     assert "reprojection error" in r.stdout
 
 
+def test_a_camera_writing_srgb_is_simulated_calibrated_and_scanned_with_its_gamma(tmp_path):
+    """`simulate --gamma 2.2` writes every image as an sRGB-like camera would, and rig.json says so;
+    `calibrate` records camera_gamma from rig.json and calibrates as well as from linear images; the scan
+    linearises with it and labels the animal as the simulator's truth has it."""
+    import numpy as np
+
+    from measurement import load_calibration, scan
+    from measurement.images import read_image
+    from measurement.simulate.truth import match_crossings
+
+    cap = tmp_path / "cap"
+    r = bodyscan("simulate", cap, "--size", "1024x683", "--poses", "6", "--seed", "5", "--scene", "side",
+                 "--gamma", "2.2")
+    assert r.returncode == 0, r.stderr
+    assert json.loads((cap / "rig.json").read_text())["camera_gamma"] == 2.2
+    assert read_image(cap / "scan" / "side_ambient.png").mean() > 40  # dim room light lifted by the encoding
+    assert bodyscan("calibrate", cap, "-o", tmp_path / "calibration.json").returncode == 0
+    cal, truth = (json.loads(p.read_text()) for p in (tmp_path / "calibration.json", cap / "truth" / "truth.json"))
+    assert cal["camera_gamma"] == 2.2 and cal["reprojection_error_px"] < 0.2
+    normals = np.array(cal["planes"])[:, :3], np.array(truth["planes"])[:, :3]
+    assert np.degrees(np.arccos(np.clip(np.abs(np.sum(normals[0] * normals[1], axis=1)), 0, 1))).max() < 0.1
+    r = bodyscan("scan", tmp_path / "calibration.json", cap / "scan" / "side.png", "-o", tmp_path / "out")
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "out" / "measurements.json").read_text())["point_count"] > 1000
+    result = scan(read_image(cap / "scan" / "side.png"), load_calibration(tmp_path / "calibration.json"), "side")
+    tk, kind = match_crossings(result.scene_uv, dict(np.load(cap / "truth" / "side_stripes.npz")))
+    animal = kind == 5
+    assert animal.sum() > 1000 and np.mean(result.scene_stripe[animal] == tk[animal]) > 0.98
+    r = bodyscan("simulate", tmp_path / "x", "--gamma", "0")
+    assert r.returncode == 2 and "--gamma must be from 0.2 to 5.0" in r.stderr
+
+
 @pytest.mark.parametrize("damage, message", [
     ("truncate", "pose_02_board.png: image file is truncated"),
     ("text", "pose_02_board.png: not a readable image"),

@@ -82,10 +82,11 @@ def test_a_gamma_encoded_image_scans_as_the_linear_one_with_the_camera_s_gamma(s
 
     from measurement import load_calibration, scan
     from measurement.images import read_image
+    from measurement.simulate.capture import display_encoded
 
     cal = small_capture / "truth" / "truth.json"
     linear = read_image(small_capture / "scan" / "side.png")
-    encoded = np.clip(np.rint(255.0 * (linear / 255.0) ** (1 / 2.2)), 0, 255).astype(np.uint8)
+    encoded = display_encoded(linear, 2.2)
     cv2.imwrite(str(tmp_path / "side.png"), encoded)
     assert bodyscan("scan", cal, tmp_path / "side.png", "--gamma", "2.2", "-o", tmp_path / "lin").returncode == 0
     assert bodyscan("scan", cal, tmp_path / "side.png", "-o", tmp_path / "raw").returncode == 0

@@ -1,6 +1,6 @@
 """Write a simulated capture folder (the project's import format) with its ground truth beside it.
 
-    OUT/rig.json                 {"board_cols", "board_rows", "square_mm", "stripes"}
+    OUT/rig.json                 {"board_cols", "board_rows", "square_mm", "stripes"[, "camera_gamma"]}
     OUT/calib/pose_NN_board.png  room light only          OUT/calib/pose_NN_stripes.png  stripes on
     OUT/scan/<view>.png          animal under stripes     OUT/scan/<view>_ambient.png    stripes off
     OUT/truth/truth.json         intrinsics, planes, board poses
@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -146,7 +147,8 @@ def calibration_scene(board: Board, R: np.ndarray, t: np.ndarray, fx: float) -> 
 def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] = (3072, 2048), seed: int = 0,
                   scenes: tuple[str, ...] = ("side", "top"), poses: int = 12, mesh: str | None = None,
                   fur: bool = True, board: Board | None = None, defects: dict[int, str] | None = None,
-                  rig: Rig | None = None, light: dict | None = None, scene: dict | None = None) -> Path:
+                  rig: Rig | None = None, light: dict | None = None, scene: dict | None = None,
+                  gamma: float = 1.0) -> Path:
     """Render a complete capture (calibration poses + animal views) with ground truth; returns ``out_dir``.
 
     defects : {pose number (1-based): "no_board" | "no_stripes"} renders deliberately unusable poses.
@@ -154,6 +156,8 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
               plus "stripe_ambient" to set the room light of the calibration stripe images.
     scene   : options of the animal views' scene (``animal_scene``: "wall", "floor_albedo", "floor", "box",
               "coat", "platform", "rails", "camera_height", "camera_aimed", "camera_back").
+    gamma   : the camera's display gamma: every image is written encoded with it (``display_encoded``: 2.2 as
+              an sRGB camera or renderer writes), and rig.json and truth.json say so (``camera_gamma``)
     """
     light = dict(light or {})
     stripe_ambient = light.pop("stripe_ambient", None)
@@ -167,9 +171,15 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
     rig = rig or default_rig(size, stripes)
     rng = np.random.default_rng(seed)
     rays_xy = ray_grid(rig.intrinsics)
-    (out / "rig.json").write_text(json.dumps({"board_cols": board.cols, "board_rows": board.rows,
-                                              "square_mm": board.square_mm, "stripes": stripes}))
+    settings = {"board_cols": board.cols, "board_rows": board.rows, "square_mm": board.square_mm, "stripes": stripes}
+    (out / "rig.json").write_text(json.dumps({**settings, "camera_gamma": gamma} if gamma != 1.0 else settings))
     truth = _rig_truth(rig, board)
+    if gamma != 1.0:
+        truth["camera_gamma"] = gamma
+
+    def write(path: Path, img: np.ndarray) -> None:
+        cv2.imwrite(str(path), display_encoded(img, gamma))
+
     defects = defects or {}
     for i, (R, t) in enumerate(sample_poses(board, rig, poses, rng), start=1):
         name = f"pose_{i:02d}"
@@ -183,28 +193,38 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
         amb = rng.uniform(25, 45) if stripe_ambient is None else stripe_ambient
         on = Lighting(**{**light, "ambient": amb, "stripes_on": defects.get(i) != "no_stripes", "fur": False})
         stripe_img = expose(hits, surfaces, rig, on, rng, irr)
-        cv2.imwrite(str(out / "calib" / f"{name}_board.png"), board_img)
-        cv2.imwrite(str(out / "calib" / f"{name}_stripes.png"), stripe_img)
+        write(out / "calib" / f"{name}_board.png", board_img)
+        write(out / "calib" / f"{name}_stripes.png", stripe_img)
         truth["board_poses"].append({"name": name, "R": R.tolist(), "t": t.tolist(), "defect": defects.get(i)})
         st = stripe_truth(hits, stripe, rig, surfaces)
         np.savez_compressed(out / "truth" / f"{name}_stripes.npz", **st)  # type: ignore[arg-type]
     animal = from_mesh(mesh) if mesh else quadruped(seed=seed)
     for view in scenes:
-        _write_view(out, view, animal, rig, rays_xy, fur, seed, rng, truth, light, scene or {})
+        _write_view(out, view, animal, rig, rays_xy, fur, seed, rng, truth, light, scene or {}, write)
     (out / "truth" / "truth.json").write_text(json.dumps(truth, indent=1))
     return out
 
 
+def display_encoded(img: np.ndarray, gamma: float) -> np.ndarray:
+    """The 8-bit image a camera or renderer writing display gamma ``gamma`` writes of a linear frame (uint8 or
+    uint16): 255 (v / vmax)^(1 / gamma), rounded; the frame itself for gamma 1."""
+    if gamma == 1.0:
+        return img
+    top = 65535.0 if img.dtype == np.uint16 else 255.0
+    return np.clip(np.rint(255.0 * (img.astype(np.float64) / top) ** (1.0 / gamma)), 0, 255).astype(np.uint8)
+
+
 def _write_view(out: Path, view: str, animal: Animal, rig: Rig, rays_xy: np.ndarray, fur: bool, seed: int,
-                rng: np.random.Generator, truth: dict, light: dict, scene: dict) -> None:
+                rng: np.random.Generator, truth: dict, light: dict, scene: dict,
+                write: Callable[[Path, np.ndarray], None]) -> None:
     surfaces, R, t = animal_scene(animal, view, fur, seed, **scene)
     hits = trace(surfaces, rig.intrinsics, rays_xy)
     irr, stripe = stripe_irradiance(hits, rig, surfaces)
     ambient = rng.uniform(30, 50)
     img = expose(hits, surfaces, rig, Lighting(**{"ambient": ambient, **light, "fur": fur}), rng, irr)
     amb = expose(hits, surfaces, rig, Lighting(**{"ambient": ambient, **light, "stripes_on": False, "fur": fur}), rng)
-    cv2.imwrite(str(out / "scan" / f"{view}.png"), img)
-    cv2.imwrite(str(out / "scan" / f"{view}_ambient.png"), amb)
+    write(out / "scan" / f"{view}.png", img)
+    write(out / "scan" / f"{view}_ambient.png", amb)
     st = stripe_truth(hits, stripe, rig, surfaces)
     np.savez_compressed(out / "truth" / f"{view}_stripes.npz", **st)  # type: ignore[arg-type]
     mesh_cam = surfaces[0]
