@@ -232,6 +232,7 @@ class Labels:
     unplaced: int = 0
     faint_shadow: bool = False
     segment_order: np.ndarray | None = None
+    tips: np.ndarray | None = None
 
 
 def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], planes: np.ndarray,
@@ -357,7 +358,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     if bg_planes is not None and from_above:
         labels = _off_plane_background(rays, planes, seg, c.v, labels, bg_labels, bg_planes, by_segment)
     return Labels(labels, bg_planes, seg, int(weighed.sum()), int((weighed & (labels < 0)).sum()), shallow,
-                  by_segment)
+                  by_segment, np.fromiter(tips, np.int64, len(tips)) if tips else None)
 
 
 def _off_plane_background(rays, planes, seg, rows, labels, bg_labels: dict[int, int], bg_planes,

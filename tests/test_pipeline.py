@@ -519,6 +519,22 @@ def test_seen_from_above_a_tail_tip_beyond_the_last_labelled_stripe_takes_the_ne
     tk, kind = match_crossings(tipped.uv.astype(float), t)
     new = np.isin(tipped.stripe, list(set(found.values()))) & (kind == 5) & (tk >= 0)
     assert new.sum() >= 10 and np.mean(tipped.stripe[new] == tk[new]) > 0.95
+    # a drooping tail's stripes lie farther apart than the cloud's connectivity: the tip, cut off from the
+    # animal's cluster (here by hand), stays with it
+    import measurement.pipeline as pipeline
+
+    monkeypatch.setattr(matching, "_tips", tips)
+    isolate = pipeline.isolate_with_margin
+    tip_k = np.array(sorted(set(found.values())))
+
+    def cut(pts, *a, **k):
+        animal, margin = isolate(pts, *a, **k)
+        return animal & ~np.isin(np.arange(len(pts)), np.flatnonzero(np.isin(cut.stripe, tip_k))), margin
+
+    cut.stripe = tipped.scene_stripe
+    monkeypatch.setattr(pipeline, "isolate_with_margin", cut)
+    kept = scan(img, cal, "top")
+    assert np.isin(kept.stripe, tip_k).sum() == np.isin(tipped.stripe, tip_k).sum() > 0
 
 
 def _view_and_truth(cap, view: str):
