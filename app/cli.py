@@ -115,7 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("-o", "--output", default="calibration.json")
     c.add_argument("--intrinsics", default=None, help="reuse the camera of an earlier calibration.json")
     c.add_argument("-v", "--verbose", action="store_true")
-    c.add_argument("--gamma", type=float, default=None,
+    c.add_argument("--gamma", type=_gamma, default=None,
                    help="the camera's display gamma, recorded for its scans: 1.0 if it writes light linearly, "
                         "2.2 if it writes sRGB-like images (default: rig.json's camera_gamma, else 1.0)")
     c.set_defaults(func=cmd_calibrate)
@@ -125,7 +125,7 @@ def build_parser() -> argparse.ArgumentParser:
     sc.add_argument("images", nargs="+")
     sc.add_argument("--view", choices=["side", "top", "front", "back"], default=None)
     sc.add_argument("-o", "--output", default="scan_out")
-    sc.add_argument("--gamma", type=float, default=None,
+    sc.add_argument("--gamma", type=_gamma, default=None,
                     help="the camera's display gamma for these images (default: the calibration's camera_gamma)")
     sc.set_defaults(func=cmd_scan)
 
