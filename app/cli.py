@@ -28,15 +28,17 @@ def _size(text: str) -> tuple[int, int]:
 
 
 def _gamma(text: str) -> float:
-    from measurement.capture import GAMMA_RANGE
+    from measurement.capture import gamma_problem
 
+    value: float | str = text  # (named as it was given when it is no number)
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--gamma must be a number, got {text!r}") from None
-    if not GAMMA_RANGE[0] <= value <= GAMMA_RANGE[1]:
-        raise argparse.ArgumentTypeError(f"--gamma must be from {GAMMA_RANGE[0]} to {GAMMA_RANGE[1]}, got {text}")
-    return value
+        pass
+    problem = gamma_problem(value)
+    if problem:
+        raise argparse.ArgumentTypeError(f"--gamma: {problem}")
+    return float(value)
 
 
 def cmd_simulate(args: argparse.Namespace) -> None:

@@ -151,9 +151,9 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     if labels.tips is not None and labels.background is not None and animal.any():
         # a drooping tail's stripes lie farther apart than the cloud's connectivity reaches: its tip, placed
         # beside the animal's end stripe (``matching._tips``), stays with the animal where it is off the floor
-        on_tip = np.isin(seg_ids.take(idx), labels.tips)
-        off = np.abs(pts @ labels.background[:, :3].T - labels.background[:, 3]).min(axis=1) > margin
-        animal |= on_tip & off
+        tip = np.flatnonzero(np.isin(seg_ids.take(idx), labels.tips))
+        off = np.abs(pts[tip] @ labels.background[:, :3].T - labels.background[:, 3]).min(axis=1) > margin
+        animal[tip[off]] = True
     animal_pts, animal_stripe = pts[animal], stripe[animal]
     ends = None
     if faint is not None and len(animal_pts):

@@ -54,7 +54,7 @@ def test_a_camera_writing_srgb_is_simulated_calibrated_and_scanned_with_its_gamm
     animal = kind == 5
     assert animal.sum() > 1000 and np.mean(result.scene_stripe[animal] == tk[animal]) > 0.98
     r = bodyscan("simulate", tmp_path / "x", "--gamma", "0")
-    assert r.returncode == 2 and "--gamma must be from 0.2 to 5.0" in r.stderr
+    assert r.returncode == 2 and "--gamma: camera_gamma must be a number from 0.2 to 5.0" in r.stderr
 
 
 @pytest.mark.parametrize("damage, message", [
