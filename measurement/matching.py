@@ -69,6 +69,7 @@ __all__ = ["Labels", "MatchingParams", "denoise", "label_centres", "link_segment
 GAP_PENALTY_MM = 8.0
 SMALL_PIECE = 0.25  # pieces under this share of the largest are left to growth from their neighbours
 OFF_PLANE_ENDS = 8  # how many centres at each end of a background segment ``_off_plane_background`` weighs
+TOUCH_GAP, TOUCH_PX, TOUCH_ROWS = 4, 6.0, 8  # ``_touching_background``: rows, columns, rows
 OFF_PLANE = 10.0  # background centres farther off their plane than this many times its noise are dropped
 SMALL_FLOOR = 0.05  # largest share of a small piece's cells that may conflict at its chosen offset
 ANCHOR_SHARE = 0.8  # share of a small piece's labelled centres that must agree on its offset (``_anchored``)
@@ -357,6 +358,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
         labels = _enforce_row_order(c, labels, order)
     if bg_planes is not None and from_above:
         labels = _off_plane_background(rays, planes, seg, c.v, labels, bg_labels, bg_planes, by_segment)
+        labels = _touching_background(c, seg, labels, bg_labels, shape[1], by_segment)
     return Labels(labels, bg_planes, seg, int(weighed.sum()), int((weighed & (labels < 0)).sum()), shallow,
                   by_segment, np.fromiter(tips, np.int64, len(tips)) if tips else None)
 
@@ -403,6 +405,55 @@ def _off_plane_background(rays, planes, seg, rows, labels, bg_labels: dict[int, 
     off = d[np.arange(len(idx)), j] > OFF_PLANE * noise[j]
     out = labels.copy()
     out[idx[off]] = -1
+    return out
+
+
+def _touching_background(c: Centres, seg: np.ndarray, labels: np.ndarray, bg_labels: dict[int, int], width: int,
+                         order: np.ndarray) -> np.ndarray:
+    """``labels`` (M,) without the background centres near an end of a background segment (``bg_labels``) that
+    runs straight on into a centre of the animal with another index: within ``TOUCH_GAP`` rows past the
+    segment's first or last centre and ``TOUCH_PX`` columns of it (both at 3072 px width). Seen from above,
+    where the animal's stripe ends at its flank the floor's stripe four or five over can continue it in the
+    same column (the depth alias): the line is one in the image, so the segment's last rows are the animal's
+    crossing read on the floor's plane, where it lies as flat as the floor (``_off_plane_background`` cannot
+    see it), or an animal piece is linked to the floor's stripe. The segment's centres within
+    ``TOUCH_ROWS`` rows of such an end are left unlabelled. For top views only, as
+    ``_off_plane_background``: from the side a floor stripe runs on up a foot with its own index.
+    ``order`` : ``segment_rows(seg, c.v)``."""
+    if not bg_labels:
+        return labels
+    is_bg = np.zeros(seg.max() + 1, bool)
+    is_bg[np.fromiter(bg_labels, np.int64, len(bg_labels))] = True
+    animal = np.flatnonzero((labels >= 0) & ~is_bg[seg])
+    if len(animal) == 0:
+        return labels
+    scale = width / 3072.0
+    gap, px, reach = max(1, round(TOUCH_GAP * scale)), TOUCH_PX * scale, max(1, round(TOUCH_ROWS * scale))
+    idx = order[is_bg[seg[order]]]  # the background segments' centres, by segment then row
+    if len(idx) == 0:
+        return labels
+    run = runs(seg[idx])
+    first, last = idx[run[:-1]], idx[run[1:] - 1]
+    span = width + 64  # row-major keys of the animal's centres; a window of columns is one key range
+    akey = c.v[animal].astype(np.int64) * span + np.rint(c.u[animal]).astype(np.int64)
+    akey_order = np.argsort(akey)
+    akey = akey[akey_order]
+    alab = labels[animal][akey_order]
+    out = labels.copy()
+    for ends, sign in ((first, -1), (last, 1)):
+        u = np.rint(c.u[ends]).astype(np.int64)
+        v = c.v[ends].astype(np.int64)
+        own = np.array([bg_labels[s] for s in seg[ends].tolist()], np.int64)
+        hit = np.zeros(len(ends), bool)
+        for dr in range(1, gap + 1):
+            row = (v + sign * dr) * span
+            lo = np.searchsorted(akey, row + u - int(np.ceil(px)))
+            hi = np.searchsorted(akey, row + u + int(np.ceil(px)), side="right")
+            for j in np.flatnonzero(hi > lo):  # few ends touch anything
+                hit[j] |= bool((alab[lo[j]:hi[j]] != own[j]).any())
+        for j in np.flatnonzero(hit):  # ends[j] closes the j-th segment's run of idx
+            members = idx[run[j]:run[j + 1]]
+            out[members[np.abs(c.v[members].astype(np.int64) - v[j]) < reach]] = -1
     return out
 
 

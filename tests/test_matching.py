@@ -529,6 +529,42 @@ def test_a_floor_segment_keeps_its_labels_but_where_its_end_leaves_the_floor():
     assert (out[dropped] == -1).all()
 
 
+
+def test_a_floor_segment_loses_its_rows_where_it_runs_straight_into_the_animal():
+    """Seen from above, the floor's stripe k + 4 can continue the animal's stripe k in the same column where
+    it ends at the flank: the floor's segment then holds the animal's last rows, read on the floor's plane as
+    flat as the floor. The floor centres within ``TOUCH_ROWS`` rows of a floor segment's end that runs on
+    into an animal centre of another index lose their label (``matching._touching_background``); a floor
+    segment that ends apart from the animal, one whose neighbour past the end has its own index, and the
+    animal's centres keep theirs."""
+    from measurement.detection import Centres
+    from measurement.matching import TOUCH_ROWS, _touching_background
+    from measurement.segments import segment_rows
+
+    u, v, seg, labels = [], [], [], []
+
+    def stripe(s: int, col: float, rows: range, label: int) -> None:
+        for r in rows:
+            u.append(col)
+            v.append(r)
+            seg.append(s)
+            labels.append(label)
+
+    stripe(0, 500.0, range(100, 160), 29)  # floor stripe 29, ends at row 159 ...
+    stripe(1, 501.0, range(161, 200), 25)  # ... where the animal's stripe 25 goes on in the same column
+    stripe(2, 700.0, range(100, 160), 33)  # a floor stripe ending apart from everything
+    stripe(3, 900.0, range(100, 160), 35)  # a floor stripe that the same stripe continues (index 35)
+    stripe(4, 900.0, range(161, 200), 35)
+    c = Centres(np.array(u), np.array(v, np.int32), np.full(len(u), 40.0, np.float32),
+                np.full(len(u), 6.0, np.float32))
+    seg, labels = np.array(seg), np.array(labels)
+    out = _touching_background(c, seg, labels, {0: 29, 2: 33, 3: 35}, 3072, segment_rows(seg, c.v))
+    dropped = np.flatnonzero(out != labels)
+    assert (out[dropped] == -1).all()
+    assert sorted(c.v[dropped].tolist()) == list(range(160 - TOUCH_ROWS, 160))
+    assert (seg[dropped] == 0).all()
+
+
 def test_a_piece_grows_best_supported_first(tmp_path, monkeypatch):
     """With the projector's stripes 1.5 times as far apart, seen from above (bench/optics.py's sparse fan,
     1536 px), segments joined the first piece on the votes of a few rows whose row neighbour lay across a
