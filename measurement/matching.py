@@ -428,7 +428,7 @@ def _touching_background(c: Centres, seg: np.ndarray, labels: np.ndarray, bg_lab
     if len(animal) == 0:
         return labels
     scale = width / 3072.0
-    gap, px, reach = max(1, round(TOUCH_GAP * scale)), TOUCH_PX * scale, max(1, round(TOUCH_ROWS * scale))
+    gap, px, reach = max(1, round(TOUCH_GAP * scale)), int(np.ceil(TOUCH_PX * scale)), max(1, round(TOUCH_ROWS * scale))
     idx = order[is_bg[seg[order]]]  # the background segments' centres, by segment then row
     if len(idx) == 0:
         return labels
@@ -447,8 +447,8 @@ def _touching_background(c: Centres, seg: np.ndarray, labels: np.ndarray, bg_lab
         hit = np.zeros(len(ends), bool)
         for dr in range(1, gap + 1):
             row = (v + sign * dr) * span
-            lo = np.searchsorted(akey, row + u - int(np.ceil(px)))
-            hi = np.searchsorted(akey, row + u + int(np.ceil(px)), side="right")
+            lo = np.searchsorted(akey, row + u - px)
+            hi = np.searchsorted(akey, row + u + px, side="right")
             for j in np.flatnonzero(hi > lo):  # few ends touch anything
                 hit[j] |= bool((alab[lo[j]:hi[j]] != own[j]).any())
         for j in np.flatnonzero(hit):  # ends[j] closes the j-th segment's run of idx

@@ -529,7 +529,6 @@ def test_a_floor_segment_keeps_its_labels_but_where_its_end_leaves_the_floor():
     assert (out[dropped] == -1).all()
 
 
-
 def test_a_floor_segment_loses_its_rows_where_it_runs_straight_into_the_animal():
     """Seen from above, the floor's stripe k + 4 can continue the animal's stripe k in the same column where
     it ends at the flank: the floor's segment then holds the animal's last rows, read on the floor's plane as
