@@ -57,6 +57,7 @@ from .segments import (
     row_neighbours,
     row_order,
     runs,
+    segment_mask,
     segment_rows,
     smooth_along_segments,
     spans,
@@ -299,8 +300,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
                                                    pairs, table, footprint, from_above, (link, 0.25 * spacing_mm))
     if fg_labels:
         # pieces of the animal without shadow evidence of their own continue a labelled piece's surface
-        is_bg = np.zeros(seg.max() + 1, bool)
-        is_bg[list(seg_label)] = True
+        is_bg = segment_mask(seg, seg_label)
         fg_mask = long_seg & ~is_bg[seg]
         if bg_planes is not None:  # leave alone what some index would put on the floor or wall
             fg_mask &= ~background_like(rays, planes, seg, fg_mask, bg_planes, set(fg_labels))
@@ -338,15 +338,12 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     labels = _labels_of(seg, seg_label, long_seg)
     tips: dict[int, int] = {}
     if from_above and bg_planes is not None and fg_labels:  # a tail tip beyond the animal's end stripes
-        is_bg = np.zeros(seg.max() + 1, bool)
-        is_bg[np.fromiter(bg_labels, np.int64, len(bg_labels))] = True
+        is_bg = segment_mask(seg, bg_labels)
         tips = _tips(c, rays, planes, seg, labels, is_bg, long_seg, left, right, bg_planes, spacing_mm,
                      params.depth_range_mm, by_segment)
         if tips:
             seg_label.update(tips)
-            is_tip = np.zeros(seg.max() + 1, bool)
-            is_tip[np.fromiter(tips, np.int64, len(tips))] = True
-            tip = is_tip[seg]
+            tip = segment_mask(seg, tips)[seg]
             labels[tip] = label_table(seg, tips)[seg[tip]]
     ok = labels >= 0
     at = np.flatnonzero(ok)
@@ -383,9 +380,7 @@ def _off_plane_background(rays, planes, seg, rows, labels, bg_labels: dict[int, 
     centres unlabelled and 2-3 times the time; 4 or 6 times the noise (at least 1 mm): 11 906 or 12 103 wrong,
     118 861 or 24 270 background centres unlabelled; 15 times (at least 2 mm): 13 100 and 1251 (those
     figures for every view direction). ``order`` : ``segment_rows(seg, rows)``, when known."""
-    is_bg = np.zeros(seg.max() + 1, bool)
-    if bg_labels:
-        is_bg[np.fromiter(bg_labels, np.int64, len(bg_labels))] = True
+    is_bg = segment_mask(seg, bg_labels)
     weigh = (labels >= 0) & is_bg[seg]
     if not weigh.any():
         return labels
@@ -422,8 +417,7 @@ def _touching_background(c: Centres, seg: np.ndarray, labels: np.ndarray, bg_lab
     ``order`` : ``segment_rows(seg, c.v)``."""
     if not bg_labels:
         return labels
-    is_bg = np.zeros(seg.max() + 1, bool)
-    is_bg[np.fromiter(bg_labels, np.int64, len(bg_labels))] = True
+    is_bg = segment_mask(seg, bg_labels)
     animal = np.flatnonzero((labels >= 0) & ~is_bg[seg])
     if len(animal) == 0:
         return labels
@@ -440,10 +434,11 @@ def _touching_background(c: Centres, seg: np.ndarray, labels: np.ndarray, bg_lab
     akey = akey[akey_order]
     alab = labels[animal][akey_order]
     out = labels.copy()
+    bg_table = label_table(seg, bg_labels)
     for ends, sign in ((first, -1), (last, 1)):
         u = np.rint(c.u[ends]).astype(np.int64)
         v = c.v[ends].astype(np.int64)
-        own = np.array([bg_labels[s] for s in seg[ends].tolist()], np.int64)
+        own = bg_table[seg[ends]]
         hit = np.zeros(len(ends), bool)
         for dr in range(1, gap + 1):
             row = (v + sign * dr) * span

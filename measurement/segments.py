@@ -135,6 +135,14 @@ def label_table(seg: np.ndarray, seg_label: dict[int, int]) -> np.ndarray:
     return table
 
 
+def segment_mask(seg: np.ndarray, keys) -> np.ndarray:
+    """True (S,) for every segment id up to seg.max() among ``keys`` (a dict of segment -> label, or ids)."""
+    mask = np.zeros(seg.max() + 1, bool)
+    if len(keys):
+        mask[np.fromiter(keys, np.int64, len(keys))] = True
+    return mask
+
+
 def spans(start: np.ndarray, count: np.ndarray) -> np.ndarray:
     """The ranges start[j] .. start[j] + count[j] - 1 one after another (count.sum(),): the positions of
     groups laid out by their starts, without a Python loop."""
