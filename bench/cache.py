@@ -1,6 +1,6 @@
 """Every view in the render cache, scanned and scored: the quick check of a labelling change.
 
-    python bench/cache.py dump OUT.json [--cache /tmp/bodyscan-bench]
+    python bench/cache.py dump OUT.json [--cache /tmp/bodyscan-bench] [--surface]
     python bench/cache.py compare BEFORE.json AFTER.json [--view top]
 
 The other benches render their views into the cache (``/tmp/bodyscan-bench`` by default) once; ``dump``
@@ -8,11 +8,13 @@ scans each of them with the checkout's code (the five-seed bench's, the robustne
 about 230 views in under a minute) and writes per view the animal's true crossings, how many of its centres
 were labelled and how many of those right, the background's, the body length and height, and the count of
 wrong labels by their distance from the truth, and the same length and height definitions applied to the
-true stripe points. ``compare`` prints the totals of two dumps over the views both hold (views with at
+true stripe points; with ``--surface`` also the share of the animal's points within 2 mm of its true surface
+and their RMS (``bench/scan.py``'s figures; a few minutes more). ``compare`` prints the totals of two dumps over the views both hold (views with at
 least half the animal labelled and 95 % of that right; animal centres right and wrong; background centres
 wrong; the wrong labels of the views placed in the first dump by their shift from the truth; over those
 views, how many lengths and heights lie within 1 % of the truth's, their mean error and how many lie over
-it by more than 1 and 2 %) and every view whose animal labels or length moved. A dump without the truth's
+it by more than 1 and 2 %; where both dumps have them, how many views have 99.5 % of their points within
+2 mm, the mean share and the RMS) and every view whose animal labels or length moved. A dump without the truth's
 figures (made before they were added) is compared with the other dump's. To compare two versions, dump with each
 checkout's own copy (it imports the checkout it lies in: ``python ../other/bench/cache.py dump B.json``).
 """
@@ -38,7 +40,7 @@ from measurement.pipeline import scan  # noqa: E402
 from measurement.simulate.truth import match_crossings  # noqa: E402
 
 
-def score_view(cap: Path, view: str) -> dict:
+def score_view(cap: Path, view: str, surface: bool = False) -> dict:
     """The scores of one cached view (see the module docstring)."""
     try:
         r = scan(read_image(cap / "scan" / f"{view}.png"), load_calibration(cap / "truth" / "truth.json"), view)
@@ -58,16 +60,31 @@ def score_view(cap: Path, view: str) -> dict:
         "length": r.measurements.get("body_length_mm"), "height": r.measurements.get("body_height_mm"),
         "points": int(len(r.points)), "wrong_by_shift": {int(d): int(n) for d, n in zip(diffs, counts, strict=True)},
         "length_truth": ref.get("body_length_mm"), "height_truth": ref.get("body_height_mm"),
+        **(_surface(cap, view, r.points) if surface else {}),
     }
 
 
-def dump(cache: Path, out: Path) -> None:
+def _surface(cap: Path, view: str, points: np.ndarray) -> dict:
+    """The share of ``points`` (N, 3) within 2 mm of the view's true animal surface, and their RMS (mm)."""
+    import trimesh
+
+    from bench.scan import surface_distance
+
+    if len(points) == 0:
+        return {}
+    d = surface_distance(trimesh.load(cap / "truth" / f"{view}_animal.ply", process=False), points)
+    within = d < 2.0
+    return {"within_2mm": float(within.mean()),
+            "rms_within_mm": float(np.sqrt(np.mean(d[within] ** 2))) if within.any() else None}
+
+
+def dump(cache: Path, out: Path, surface: bool = False) -> None:
     t0 = time.perf_counter()
     views: dict[str, dict] = {}
     for cap in sorted(p for p in cache.iterdir() if (p / "truth" / "truth.json").exists()):
         for view in json.loads((cap / "truth" / "truth.json").read_text()).get("views", {}):
             if (cap / "scan" / f"{view}.png").exists():
-                views[f"{cap.name}/{view}"] = score_view(cap, view)
+                views[f"{cap.name}/{view}"] = score_view(cap, view, surface)
     out.write_text(json.dumps({"views": views}, indent=1))
     print(f"{len(views)} views scored in {time.perf_counter() - t0:.0f} s -> {out}")
 
@@ -111,6 +128,14 @@ def compare(before: Path, after: Path, view: str | None) -> None:
               + ", ".join(f"{s:+d}: {x} -> {y}" for s, (x, y) in top))
     for name in ("length", "height"):
         print(_accuracy(name, [k for k in keys if placed(a[k])], a, b))
+    both = [k for k in keys if placed(a[k]) and all(d[k].get("rms_within_mm") is not None for d in (a, b))]
+    if both:
+        w = [np.array([d[k]["within_2mm"] for k in both]) for d in (a, b)]
+        rms = [np.array([d[k]["rms_within_mm"] for k in both]) for d in (a, b)]
+        print(f"  points of the {len(both)} views placed before: views with 99.5 % within 2 mm "
+              f"{int(np.sum(w[0] >= 0.995))} -> {int(np.sum(w[1] >= 0.995))}, mean share within 2 mm "
+              f"{w[0].mean():.2%} -> {w[1].mean():.2%}, views with RMS <= 0.5 mm {int(np.sum(rms[0] <= 0.5))} -> "
+              f"{int(np.sum(rms[1] <= 0.5))}, mean RMS {rms[0].mean():.3f} -> {rms[1].mean():.3f} mm")
     for k in keys:
         va, vb = a[k], b[k]
         if any(va.get(f) != vb.get(f) for f in ("error", "animal_labelled", "animal_right", "length")):
@@ -142,13 +167,14 @@ def main() -> None:
     d = sub.add_parser("dump")
     d.add_argument("out", type=Path)
     d.add_argument("--cache", type=Path, default=Path("/tmp/bodyscan-bench"))
+    d.add_argument("--surface", action="store_true", help="score the points against the true surface too")
     c = sub.add_parser("compare")
     c.add_argument("before", type=Path)
     c.add_argument("after", type=Path)
     c.add_argument("--view", choices=("side", "top", "front", "back"))
     args = ap.parse_args()
     if args.cmd == "dump":
-        dump(args.cache, args.out)
+        dump(args.cache, args.out, args.surface)
     else:
         compare(args.before, args.after, args.view)
 
