@@ -301,7 +301,8 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
            per-stripe extents (height, or width from above) read them with the group's points; the groups
            (at least ``min_group`` points of the cloud) and the extents are the cloud's alone.
     wide : points (W, 3) mm, stripe indices (W,) and rows (W,) of the animal's labelled centres the cloud
-           leaves out (wide or one-sided peaks: ``detection.reliable``). The length reads those of the
+           leaves out (wide or one-sided peaks, ``detection.reliable``, and centres off the median along
+           their stripe, ``segments.smooth_along_stripes``). The length reads those of the
            stripes the cloud holds too few points of to make a group: where a stripe crosses a thin or
            grazing part (the tail's tip seen from above, a snout from the side) it is detected as wide, dim
            peaks, and without it the length's first or last group is the next stripe's, 7-9 % short. Their

@@ -59,14 +59,13 @@ from .segments import (
     runs,
     segment_mask,
     segment_rows,
-    smooth_along_segments,
     spans,
     split_at_changes,
 )
 from .threads import second_core
 from .triangulation import depth_in_range, depth_on, intersect, kernel_layout
 
-__all__ = ["Labels", "MatchingParams", "denoise", "label_centres", "link_segments", "smooth_along_segments"]
+__all__ = ["Labels", "MatchingParams", "denoise", "label_centres", "link_segments"]
 GAP_PENALTY_MM = 8.0
 SMALL_PIECE = 0.25  # pieces under this share of the largest are left to growth from their neighbours
 OFF_PLANE_ENDS = 8  # how many centres at each end of a background segment ``_off_plane_background`` weighs

@@ -17,12 +17,15 @@ from .calibration import Calibration
 from .detection import DetectionParams, check_image, detect_centres, detect_centres_and_faint, reliable
 from .ends import FLOOR_STOP_MM, MERGE_ROWS, end_points, faint_ends
 from .errors import ImageError, ScanError
-from .matching import Labels, MatchingParams, denoise, label_centres, smooth_along_segments
+from .matching import Labels, MatchingParams, denoise, label_centres
 from .orientation import stripe_axis, swap_xy, transpose_image
+from .segments import smooth_along_stripes
 from .threads import one_blas_thread
 from .triangulation import cloud_points, ray_table, rays_and_cells
 
 VIEWS = ("side", "top", "front", "back")
+SMOOTH_REACH = 6  # rows (at 2048) each side of a centre whose line along its stripe gives its column
+SMOOTH_JUMP_PX = 2.0  # px (at 3072) per row: a segment that goes on from another of its label within it
 
 
 @dataclass(frozen=True)
@@ -124,8 +127,10 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     t["match"] = time.perf_counter()
     seg_ids = labels.segment if labels.segment is not None else np.arange(len(centres))
     by_segment = labels.segment_order if labels.segment is not None else None  # (segment_rows of seg_ids)
-    smooth_u, ok = smooth_along_segments(centres, seg_ids, labels.stripe, order=by_segment)
-    smoothed = ok.copy()
+    smooth_u, ok = smooth_along_stripes(centres, seg_ids, labels.stripe,
+                                        SMOOTH_JUMP_PX * max(image.shape[1] / 3072.0, 0.5),
+                                        reach=max(2, round(SMOOTH_REACH * image.shape[0] / 2048)), order=by_segment)
+    left_out = labels.stripe >= 0  # the labelled centres the cloud leaves out, for ``_wide_peaks``
     # one-sided peaks and stripes widened at a grazing outline helped link and label their stripe, but
     # their position is off by 1.5-5 px: they stay out of the cloud
     ok &= reliable(centres, params.detection)
@@ -165,7 +170,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
                                   max(margin, FLOOR_STOP_MM), max(1, round(MERGE_ROWS * image.shape[0] / 2048)))
             ends = (ep[keep], ek[keep], ew[keep])
     meas = measure(animal_pts, animal_stripe, rows[animal], view, params.body, ends,
-                   _wide_peaks(centres, smoothed & ~ok, labels, animal_stripe, animal_pts, smooth_u, cells, table,
+                   _wide_peaks(centres, left_out & ~ok, labels, animal_stripe, animal_pts, smooth_u, cells, table,
                                calibration.planes, margin, params.body))
     t["measure"] = time.perf_counter()
     stages = ["start", "detect", "denoise", "match", "triangulate", "measure"]
@@ -188,9 +193,10 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
 def _wide_peaks(centres, unreliable: np.ndarray, labels: Labels, animal_stripe: np.ndarray, animal_pts: np.ndarray,
                 smooth_u: np.ndarray, cells, table, planes: np.ndarray, margin: float, body: BodyParams
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """The points (W, 3) mm, stripes (W,) and rows (W,) of the labelled centres flagged ``unreliable`` (M,)
-    that belong to the animal (``body.beside`` its cloud ``animal_pts``), of the stripes the cloud holds
-    fewer than ``min_group`` points of (``measure``'s ``wide``); None where there are none."""
+    """The points (W, 3) mm, stripes (W,) and rows (W,) of the labelled centres the cloud left out,
+    ``unreliable`` (M,) (``detection.reliable``, or off the median along their stripe), that belong to the
+    animal (``body.beside`` its cloud ``animal_pts``), of the stripes the cloud holds fewer than
+    ``min_group`` points of (``measure``'s ``wide``); None where there are none."""
     if len(animal_pts) == 0:
         return None
     counts = np.bincount(animal_stripe, minlength=len(planes))

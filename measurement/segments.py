@@ -105,25 +105,51 @@ def row_neighbours(c: Centres, order: np.ndarray | None = None) -> tuple[np.ndar
     return left, right
 
 
-def smooth_along_segments(c: Centres, segment: np.ndarray, labels: np.ndarray, half: int = 2,
-                          outlier_px: float = 1.0, order: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Average each centre's column with its neighbours along its stripe segment (+-``half`` rows; the
-    surface is smooth over a couple of millimetres along a stripe, fur noise is not) and flag centres
-    more than ``outlier_px`` off the median of their neighbourhood (specks of scattered light).
+def smooth_along_stripes(c: Centres, segment: np.ndarray, labels: np.ndarray, jump_px: float, half: int = 2,
+                         outlier_px: float = 1.0, reach: int = 6, gap: int = 3, order: np.ndarray | None = None
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Each labelled centre's column (``c.position``: the shaded centroid where detection measured it)
+    smoothed along its stripe: the value at its row of a straight line fitted to the centres of its run
+    within ``reach`` rows (the surface is smooth over a couple of millimetres along a stripe, fur noise is
+    not; a line, unlike an average, follows a slanted stripe to its ends), after flagging centres more than
+    ``outlier_px`` off the median of the 2 ``half`` + 1 around them (specks of scattered light), which the fit
+    reads as that median. A run is a linked segment's centres of one label, and the runs of that label it
+    goes on into: one that starts at most ``gap`` rows after it ends, within ``jump_px`` per row of its last
+    centre's column (linking cuts a stripe where its brightness jumps, as at fur's dark dropouts, and left a
+    fifth of a fur side view's segments too short to smooth: points beyond 2 mm 0.77 -> 0.52 %, seed 4, 40
+    stripes). Runs under 2 ``half`` + 1 centres are left as they are.
 
+    segment : (M,) linked segment id; labels : (M,) stripe index, -1 unlabelled (left as it is, flagged False)
     order : ``segment_rows(segment, c.v)`` (M,), when known
     returns : smoothed u (M,) float64, keep mask (M,) bool
     """
-    u = c.u.copy()
+    position = c.position
+    u = position.copy()
     keep = labels >= 0
     if not keep.any():
         return u, keep
     if order is None:
-        idx = np.nonzero(keep)[0]
+        idx = np.flatnonzero(keep)
         order = idx[segment_rows(segment[idx], c.v[idx])]
     else:  # the order of all the centres restricted to the labelled ones is theirs
         order = order[keep[order]]
-    _kernels.smooth_runs(order, runs(segment[order]), c.u, half, outlier_px, u, keep)
+    lab = labels[order]
+    part = runs(segment[order] * (int(labels.max()) + 1) + lab)  # one label's centres of one segment
+    first, last = order[part[:-1]], order[part[1:] - 1]
+    parent = _kernels.chain_runs(np.lexsort((c.v[first], labels[first])), labels[first], c.v[first], c.u[first],
+                                 c.v[last], c.u[last], gap, jump_px)
+    root = np.arange(len(parent))
+    while True:  # every run's chain: the run it goes on from, followed to the first
+        up = np.where(parent[root] >= 0, parent[root], root)
+        if (up == root).all():
+            break
+        root = up
+    by_chain = np.lexsort((c.v[first], root))
+    count = np.diff(part)[by_chain]
+    chained = order[spans(part[:-1][by_chain], count)]
+    chain_starts = np.r_[0, np.flatnonzero(root[by_chain][1:] != root[by_chain][:-1]) + 1, len(by_chain)]
+    starts = np.r_[0, np.cumsum(count)][chain_starts]
+    _kernels.smooth_runs(chained, starts, c.v, position, half, reach, outlier_px, u, keep)
     return u, keep
 
 

@@ -88,6 +88,29 @@ def test_a_symmetric_stripe_is_reliable_and_the_rising_side_of_a_brightness_step
     assert on_step.any() and not ok[on_step].any()
 
 
+@pytest.mark.parametrize("room", [60.0, 25.0])
+def test_the_shaded_centre_divides_out_a_reflectance_ramp_that_pulls_the_plain_centroid_off(room):
+    # dark fur (reflectance 0.15) turning to a brighter patch (0.6) across a stripe: rho (room + stripe)
+    x = np.arange(3072, dtype=float)
+    rho = 0.15 + 0.45 / (1 + np.exp(-(x - 1508) / 8.0))
+    stripe = sum(110 * np.exp(-0.5 * ((x - m) / 3.0) ** 2) for m in (1464.3, 1500.3, 1536.3))
+    c = detect_centres(_row_image(rho * (room + stripe)))
+    at = np.abs(c.u - 1500.3) < 3
+    assert at.sum() == 20
+    plain, shaded = np.abs(c.u[at] - 1500.3).max(), np.abs(c.shaded[at] - 1500.3).max()
+    assert plain > 0.5 and shaded < 0.2 and shaded < plain / 3
+    assert (c.position is c.shaded) and np.allclose(c.take(at).shaded, c.shaded[at])
+
+
+def test_without_room_light_the_shaded_centre_is_the_plain_one():
+    x = np.arange(3072, dtype=float)
+    stripe = sum(100 * np.exp(-0.5 * ((x - m) / 3.0) ** 2) for m in (200.2, 236.6, 273.0))
+    c = detect_centres(_row_image(stripe + 1.0))
+    assert len(c) == 60
+    np.testing.assert_allclose(c.shaded, c.u, atol=0.02)
+    np.testing.assert_allclose(c.shaded, np.repeat([200.2, 236.6, 273.0], 20).reshape(3, 20).T.ravel(), atol=0.05)
+
+
 def test_a_stripe_widened_at_a_grazing_surface_is_unreliable():
     x = np.arange(3072, dtype=float)
     narrow = sum(100 * np.exp(-0.5 * ((x - m) / 2.0) ** 2) for m in (40, 80, 120, 160, 200))

@@ -115,9 +115,10 @@ def test_band_centres_equal_the_opencv_and_numpy_form(small_capture, weak):
     g = det.to_gray8(read_image(small_capture / "scan" / "side.png"))
     params = det.DetectionParams(weak_contrast=weak)
     for a in range(0, g.shape[0], 100):
-        got = det._band_centres(g, a, min(a + 100, g.shape[0]), params)
+        *got, shaded = det._band_centres(g, a, min(a + 100, g.shape[0]), params)
         want = _band_reference(g, a, min(a + 100, g.shape[0]), params)
         assert all(np.array_equal(p, q) and p.dtype == q.dtype for p, q in zip(got, want, strict=True))
+        assert shaded.dtype == np.float64 and len(shaded) == len(got[0])  # (its own test above)
 
 
 def test_sample_levels_are_those_of_the_strided_sample():
@@ -160,3 +161,21 @@ def test_a_strong_second_half_of_a_flat_top_replaces_its_faint_first_half():
     assert x.tolist() == [6] and u.tolist() == [5.0] and contrast.tolist() == [10.0]
     x, *_ = _kernels.refine_peaks(s, bg, np.array([3, 6]), 4, 0)  # every peak weighed against every other
     assert x.tolist() == [3]
+
+
+def test_the_shaded_centroids_are_the_numpy_form_peak_by_peak():
+    s = _stripes(60, 400, 3)
+    bg = cv2.erode(s, np.ones((1, 17), np.uint8))
+    at = _kernels.first_peaks(_candidates(s, bg, 8), s)
+    x, y, *_ = _kernels.refine_peaks(s, bg, at, 9, 0)
+    reach = 13
+    got = _kernels.shaded_centroids(s, x, y, 0, reach, 4.0)
+    want = []
+    for xi, yi in zip(x, y, strict=True):
+        a, b = max(xi - reach, 0), min(xi + reach, s.shape[1] - 1)
+        want.append(a + det.shaded_centre(s[yi, a:b + 1], xi - a, 4.0))
+    assert len(x) > 100
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+    # rows counted from a band's first row
+    band = _kernels.shaded_centroids(s[20:], x[y >= 20], y[y >= 20], 20, reach, 4.0)
+    np.testing.assert_array_equal(band, got[y >= 20])

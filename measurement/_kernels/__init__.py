@@ -14,7 +14,7 @@ from __future__ import annotations
 from .background import first_of_each, group_counts, group_medians, inlier_counts, near_any_plane
 from .body import group_extent_with, group_extents, plane_distances, voxel_cells
 from .cloud import cloud_points, rays_and_cells
-from .detection import difference_counts, first_peaks, refine_peaks, sample_levels
+from .detection import difference_counts, first_peaks, refine_peaks, sample_levels, shaded_centroids
 from .growth import (
     depth_votes,
     flag_beside,
@@ -33,6 +33,7 @@ from .growth import (
 from .offsets import distinct_cells, merge_distinct, screened_bins, screened_bins_at
 from .rays import depth_screen, intersect, neighbour_distances, rays_at
 from .segments import (
+    chain_runs,
     change_cuts,
     crowded,
     group_members,
@@ -46,6 +47,7 @@ from .segments import (
 )
 
 __all__ = [
+    "chain_runs",
     "change_cuts",
     "cloud_points",
     "crowded",
@@ -86,6 +88,7 @@ __all__ = [
     "screened_bins_at",
     "segment_row_order",
     "segment_steps",
+    "shaded_centroids",
     "smooth_runs",
     "stable_group_order",
     "voting_pairs",

@@ -174,19 +174,21 @@ def _median5(a, b, c, d, e):
 
 
 @compiled
-def smooth_runs(order, starts, u, half, outlier_px, out, keep):
-    """``segments.smooth_along_segments`` run by run: each run ``order[starts[r]:starts[r + 1]]`` (one
-    segment's centres, top down) at least 2 ``half`` + 1 long gets into ``out`` (M,) its columns ``u``
-    (M,) px averaged over +-``half`` rows (edges repeated), a column more than ``outlier_px`` off the
-    median of its window replaced by that median and flagged False in ``keep`` (M,). The sums run as
-    np.cumsum runs them over the edge-padded run, so they round alike."""
+def smooth_runs(order, starts, v, u, half, reach, outlier_px, out, keep):
+    """``segments.smooth_along_stripes`` run by run: each run ``order[starts[r]:starts[r + 1]]`` (one
+    segment's centres, top down, rows ``v`` (M,)) at least 2 ``half`` + 1 long gets into ``out`` (M,) its
+    columns ``u`` (M,) px as a straight line fitted by least squares to the run's centres within ``reach``
+    rows of it (fewer at the run's ends: the line is not pulled there as an average of repeated end values
+    was) gives them at its row. First a column more than ``outlier_px`` off the median of the 2 ``half`` + 1
+    around it (the run's end values repeated) is replaced by that median in the fit and flagged False in
+    ``keep`` (M,)."""
     win = 2 * half + 1
     longest = 0
     for r in range(len(starts) - 1):
         longest = max(longest, starts[r + 1] - starts[r])
     xp = np.empty(longest + 2 * half)
     good = np.empty(longest + 2 * half)
-    cs = np.empty(longest + 2 * half + 1)
+    rows = np.empty(longest, np.int64)
     for r in range(len(starts) - 1):
         a, length = starts[r], starts[r + 1] - starts[r]
         if length < win:
@@ -204,11 +206,37 @@ def smooth_runs(order, starts, u, half, outlier_px, out, keep):
                 keep[order[a + j]] = False
             else:
                 good[j] = x
-        cs[0] = 0.0
-        for t in range(length + 2 * half):
-            cs[t + 1] = cs[t] + good[min(max(t - half, 0), length - 1)]
+        # the line through the centres within reach rows of centre j: sums over the window [lo, hi), rows
+        # and columns counted from the run's first centre, slid down the run
+        v_first, u_first = v[order[a]], good[0]
+        for t in range(length):
+            rows[t] = v[order[a + t]] - v_first
+        lo, hi = 0, 0
+        s0, s1, s2, su, sdu = 0.0, 0.0, 0.0, 0.0, 0.0
         for j in range(length):
-            out[order[a + j]] = (cs[j + win] - cs[j]) / win
+            while hi < length and rows[hi] <= rows[j] + reach:
+                d, x = float(rows[hi]), good[hi] - u_first
+                s0 += 1.0
+                s1 += d
+                s2 += d * d
+                su += x
+                sdu += d * x
+                hi += 1
+            while rows[lo] < rows[j] - reach:
+                d, x = float(rows[lo]), good[lo] - u_first
+                s0 -= 1.0
+                s1 -= d
+                s2 -= d * d
+                su -= x
+                sdu -= d * x
+                lo += 1
+            det = s0 * s2 - s1 * s1
+            if hi - lo >= 3 and det > 0.5:  # (a whole number: 0 when all the window's rows are one)
+                dj = float(rows[j])
+                slope = (s0 * sdu - s1 * su) / det
+                out[order[a + j]] = u_first + (su - slope * s1) / s0 + slope * dj
+            else:
+                out[order[a + j]] = u_first + su / s0
 
 
 @compiled
@@ -413,3 +441,33 @@ def walk_stops(walk, near, other, run_rows, keep):
             stopped[w] = True
         last_other[w] = o
     return keep
+
+
+@compiled
+def chain_runs(by_label, label, v0, u0, v1, u1, gap, jump):
+    """The run each run goes on from (R,) int64, -1 for none: runs ``by_label`` (R,) (their order by label,
+    then first row), each from (``v0``, ``u0``) to (``v1``, ``u1``), row and column of its first and last
+    centre, with ``label`` (R,). A run goes on from the earlier run of its label that ends at most ``gap``
+    rows before it starts, within ``jump`` px per row of its first centre's column, the nearest such in
+    column; each run goes on into one run at most (``segments.smooth_along_stripes``)."""
+    r = len(by_label)
+    parent = np.full(r, -1, np.int64)
+    taken = np.zeros(r, np.bool_)
+    first = 0  # where the current label's runs start in by_label
+    for i in range(r):
+        s = by_label[i]
+        if i > 0 and label[s] != label[by_label[i - 1]]:
+            first = i
+        best, best_du = -1, np.inf
+        for j in range(first, i):
+            t = by_label[j]
+            rows = v0[s] - v1[t]
+            if taken[t] or rows < 1 or rows > gap + 1:
+                continue
+            du = abs(u0[s] - u1[t])
+            if du <= jump * rows and du < best_du:
+                best, best_du = t, du
+        if best >= 0:
+            parent[s] = best
+            taken[best] = True
+    return parent
