@@ -156,7 +156,7 @@ def shaded_centroids(s, x, y, row0, reach, floor):
     make peaks a few pixels off a stripe, and bounded there the flanks' line came out wrong; on the cached
     views 0.1-1 % fewer points within 2 mm); ``floor``: gray levels added to the flanks' line before
     dividing by it. Only the pixels the centroid weighs are divided."""
-    h, w = s.shape
+    w = s.shape[1]
     n = len(x)
     out = np.empty(n)
     for i in range(n):
@@ -186,19 +186,15 @@ def shaded_centroids(s, x, y, row0, reach, floor):
             continue
         level = 0.5 * top
         num, den = 0.0, top - level
-        for k in range(xi - 1, il, -1):
-            base = left + slope * (k - il)
-            q = (float(row[k]) - base) / (base + floor) - level
-            if not q > 0:
-                break
-            num += (k - xi) * q
-            den += q
-        for k in range(xi + 1, ir):
-            base = left + slope * (k - il)
-            q = (float(row[k]) - base) / (base + floor) - level
-            if not q > 0:
-                break
-            num += (k - xi) * q
-            den += q
+        for sign in (-1, 1):  # the run through the peak, each way to where the ratio falls to its half
+            k = xi + sign
+            while il < k < ir:
+                base = left + slope * (k - il)
+                q = (float(row[k]) - base) / (base + floor) - level
+                if not q > 0:
+                    break
+                num += (k - xi) * q
+                den += q
+                k += sign
         out[i] = xi + num / den
     return out
