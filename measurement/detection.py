@@ -346,7 +346,7 @@ def shaded_centre(profile: np.ndarray, peak: int, floor: float = 4.0) -> float:
     if c < 1 or c > len(p) - 2:
         return float(c)
     il = int(np.argmin(p[:c]))
-    ir = c + 1 + len(p[c + 1:]) - 1 - int(np.argmin(p[c + 1:][::-1]))  # the first of equals from the outside in
+    ir = len(p) - 1 - int(np.argmin(p[c + 1:][::-1]))  # the first of equals from the outside in
     line = p[il] + (p[ir] - p[il]) / (ir - il) * (np.arange(len(p)) - il)
     ratio = (p - line) / (line + floor)
     top = ratio[c]

@@ -130,7 +130,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     smooth_u, ok = smooth_along_stripes(centres, seg_ids, labels.stripe,
                                         SMOOTH_JUMP_PX * max(image.shape[1] / 3072.0, 0.5),
                                         reach=max(2, round(SMOOTH_REACH * image.shape[0] / 2048)), order=by_segment)
-    left_out = labels.stripe >= 0  # the labelled centres the cloud leaves out, for ``_wide_peaks``
+    labelled = labels.stripe >= 0
     # one-sided peaks and stripes widened at a grazing outline helped link and label their stripe, but
     # their position is off by 1.5-5 px: they stay out of the cloud
     ok &= reliable(centres, params.detection)
@@ -170,7 +170,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
                                   max(margin, FLOOR_STOP_MM), max(1, round(MERGE_ROWS * image.shape[0] / 2048)))
             ends = (ep[keep], ek[keep], ew[keep])
     meas = measure(animal_pts, animal_stripe, rows[animal], view, params.body, ends,
-                   _wide_peaks(centres, left_out & ~ok, labels, animal_stripe, animal_pts, smooth_u, cells, table,
+                   _wide_peaks(centres, labelled & ~ok, labels, animal_stripe, animal_pts, smooth_u, cells, table,
                                calibration.planes, margin, params.body))
     t["measure"] = time.perf_counter()
     stages = ["start", "detect", "denoise", "match", "triangulate", "measure"]

@@ -116,7 +116,7 @@ def smooth_along_stripes(c: Centres, segment: np.ndarray, labels: np.ndarray, ju
     reads as that median. A run is a linked segment's centres of one label, and the runs of that label it
     goes on into: one that starts at most ``gap`` rows after it ends, within ``jump_px`` per row of its last
     centre's column (linking cuts a stripe where its brightness jumps, as at fur's dark dropouts, and left a
-    fifth of a fur side view's segments too short to smooth: points beyond 2 mm 0.77 -> 0.52 %, seed 4, 40
+    fifth of a fur side view's segments too short to smooth: points beyond 2 mm 0.77 -> 0.47 %, seed 4, 40
     stripes). Runs under 2 ``half`` + 1 centres are left as they are.
 
     segment : (M,) linked segment id; labels : (M,) stripe index, -1 unlabelled (left as it is, flagged False)

@@ -176,7 +176,7 @@ def _median5(a, b, c, d, e):
 @compiled
 def smooth_runs(order, starts, v, u, half, reach, outlier_px, out, keep):
     """``segments.smooth_along_stripes`` run by run: each run ``order[starts[r]:starts[r + 1]]`` (one
-    segment's centres, top down, rows ``v`` (M,)) at least 2 ``half`` + 1 long gets into ``out`` (M,) its
+    stripe's chained segments, top down, rows ``v`` (M,)) at least 2 ``half`` + 1 long gets into ``out`` (M,) its
     columns ``u`` (M,) px as a straight line fitted by least squares to the run's centres within ``reach``
     rows of it (fewer at the run's ends: the line is not pulled there as an average of repeated end values
     was) gives them at its row. First a column more than ``outlier_px`` off the median of the 2 ``half`` + 1
