@@ -623,7 +623,7 @@ def test_a_short_piece_that_runs_straight_on_from_a_long_stripe_takes_its_index(
 
 
 def _tip_scene(floor_rows: int):
-    """Seen from above, 1536 px: the floor (1250 mm) carries stripes 3 and 4 down rows 100-200, the animal
+    """Seen from above, 1536 px: the floor (1250 mm) carries stripes 3, 4 and 10-39 down rows 100-200, the animal
     (1150 mm) ends with stripe 5 over rows 100-160, and a raised tail tip (1165 mm) shows stripe 4 in rows
     150-170, left of stripe 5. The floor's stripe 4 leaves the tip's shadow for the last ``floor_rows`` of
     the tip's rows (all of them with 21). Returns ``matching._tips``' arguments and the tip's segment."""
