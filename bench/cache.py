@@ -3,20 +3,21 @@
     python bench/cache.py dump OUT.json [--cache /tmp/bodyscan-bench] [--surface]
     python bench/cache.py compare BEFORE.json AFTER.json [--view top]
 
-The other benches render their views into the cache (``/tmp/bodyscan-bench`` by default) once; ``dump``
-scans each of them with the checkout's code (the five-seed bench's, the robustness benches' at both sizes:
-about 230 views in under a minute) and writes per view the animal's true crossings, how many of its centres
-were labelled and how many of those right, the background's, the body length and height, and the count of
-wrong labels by their distance from the truth, and the same length and height definitions applied to the
-true stripe points; with ``--surface`` also the share of the animal's points within 2 mm of its true surface
-and their RMS (``bench/scan.py``'s figures; a few minutes more). ``compare`` prints the totals of two dumps over the views both hold (views with at
-least half the animal labelled and 95 % of that right; animal centres right and wrong; background centres
-wrong; the wrong labels of the views placed in the first dump by their shift from the truth; over those
-views, how many lengths and heights lie within 1 % of the truth's, their mean error and how many lie over
-it by more than 1 and 2 %; where both dumps have them, how many views have 99.5 % of their points within
-2 mm, the mean share and the RMS) and every view whose animal labels or length moved. A dump without the truth's
-figures (made before they were added) is compared with the other dump's. To compare two versions, dump with each
-checkout's own copy (it imports the checkout it lies in: ``python ../other/bench/cache.py dump B.json``).
+The other benches render their views into the cache (``/tmp/bodyscan-bench`` by default) once; ``dump`` scans
+each of them with the checkout's code (the five-seed bench's, the robustness benches' at both sizes: 272 views
+on 2026-12-01) and writes per view the animal's true crossings, how many of its centres were labelled and how
+many of those right, the background's, the body length and height, and the count of wrong labels by their
+distance from the truth, and the same length and height definitions applied to the true stripe points; with
+``--surface`` also the share of the animal's points within 2 mm of its true surface and their RMS
+(``bench/scan.py``'s figures; 11-14 minutes a dump, two run side by side on this 2-core host). ``compare`` prints the
+totals of two dumps over the views both hold (views with at least half the animal labelled and 95 % of that
+right; animal centres right and wrong; background centres wrong; the wrong labels of the views placed in the
+first dump by their shift from the truth; over those views, how many lengths and heights lie within 1 % of the
+truth's, their mean error and how many lie over it by more than 1 and 2 %; where both dumps have them, how
+many views have 99.5 % of their points within 2 mm, the mean share and the RMS) and every view whose animal
+labels or length moved. A dump without the truth's figures (made before they were added) is compared with the
+other dump's. To compare two versions, dump with each checkout's own copy (it imports the checkout it lies in:
+``python ../other/bench/cache.py dump B.json``).
 """
 
 from __future__ import annotations

@@ -316,9 +316,9 @@ def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams, faint:
     x, y, u, width, flank, contrast_at = _kernels.refine_peaks(s, bg, at, half, a, strong_at)
     shaded = u.copy()
     if params.shade_px > 0:  # the faint peaks (``faint``) are for the stripes' ends, not for the points
-        at = np.flatnonzero(contrast_at > strong_at) if faint > 0 else slice(None)
-        shaded[at] = _kernels.shaded_centroids(s, x[at], y[at], a, _scaled(params.shade_px, w),
-                                               float(params.shade_floor))
+        sel = np.flatnonzero(contrast_at > strong_at) if faint > 0 else slice(None)
+        shaded[sel] = _kernels.shaded_centroids(s, x[sel], y[sel], a, _scaled(params.shade_px, w),
+                                                float(params.shade_floor))
     return x, y, u, contrast_at, width, flank, shaded
 
 
