@@ -222,11 +222,10 @@ def _detect(image: np.ndarray, params: DetectionParams, ambient: np.ndarray | No
     h, w = g.shape
     # (the flat top of a wide stripe is a run of equal gray levels that a one-level dip can cut in two:
     # both halves pass the non-maximum suppression and refine to the same centroid; the bands keep one)
+    if faint_low > 0:  # split into centres and faint peaks band by band, on the bands' threads
+        return _split_bands(g, params, faint_low)
     x, y, u, contrast, width, flank, shaded = _all_bands(g, params, faint_low)
     c = Centres(u, y.astype(np.int32), contrast, width, flank, shaded)
-    if faint_low > 0:
-        strong = contrast > params.min_contrast
-        return c.take(strong), c.take(~strong & (flank >= params.flank_ratio * contrast))
     none = c.take(np.zeros(len(c), bool))
     if not hysteresis:
         return c, none
@@ -259,6 +258,23 @@ def _all_bands(g: np.ndarray, params: DetectionParams, faint: float = 0.0) -> tu
     found = list(band_workers(_WORKERS).map(lambda a: _band_centres(g, a, min(a + _BAND_ROWS, h), params, faint),
                                             range(0, h, _BAND_ROWS)))
     return tuple(np.concatenate(z) for z in zip(*found, strict=True))
+
+
+def _split_bands(g: np.ndarray, params: DetectionParams, faint: float) -> tuple[Centres, Centres]:
+    """The centres (contrast above min_contrast) and the two-sided faint peaks (above ``faint``, not above
+    min_contrast, ``flank_ratio`` of their contrast on the weaker side) of the gray image g (H, W), each in
+    raster order: each band of rows (``_band_centres``) is split on its own thread."""
+
+    def band(a: int) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+        _, y, u, contrast, width, flank, shaded = _band_centres(g, a, min(a + _BAND_ROWS, g.shape[0]), params, faint)
+        strong = contrast > params.min_contrast
+        weak = ~strong & (flank >= params.flank_ratio * contrast)
+        y = y.astype(np.int32)
+        return tuple(tuple(z[m] for z in (u, y, contrast, width, flank, shaded)) for m in (strong, weak))
+
+    found = list(band_workers(_WORKERS).map(band, range(0, g.shape[0], _BAND_ROWS)))
+    return tuple(Centres(*(np.concatenate(z) for z in zip(*parts, strict=True)))  # type: ignore[return-value]
+                 for parts in zip(*found, strict=True))
 
 
 def smoothing_gain(params: DetectionParams, width: int) -> float:

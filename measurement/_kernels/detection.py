@@ -159,28 +159,25 @@ def shaded_centroids(s, x, y, row0, reach, floor):
     w = s.shape[1]
     n = len(x)
     out = np.empty(n)
-    for i in range(n):
+    for i in range(n):  # (s[r, k], not a row view: a view per peak cost a fifth of the time)
         r = y[i] - row0
         xi = x[i]
         a, b = max(xi - reach, 0), min(xi + reach, w - 1)
-        row = s[r]
-        il, low = a, row[a]  # the flanks: the darkest pixel each side (the first of equals from the outside in)
+        il, low = a, s[r, a]  # the flanks: the darkest pixel each side (the first of equals from the outside in)
         for k in range(a + 1, xi):
-            darker = row[k] < low
-            low = min(low, row[k])
-            il = k if darker else il
-        ir, low = b, row[b]
+            if s[r, k] < low:
+                low, il = s[r, k], k
+        ir, low = b, s[r, b]
         for k in range(b - 1, xi, -1):
-            darker = row[k] < low
-            low = min(low, row[k])
-            ir = k if darker else ir
+            if s[r, k] < low:
+                low, ir = s[r, k], k
         if il >= xi or ir <= xi:  # the peak at the row's end: no flank on one side
             out[i] = xi
             continue
-        left = float(row[il])
-        slope = (float(row[ir]) - left) / (ir - il)
+        left = float(s[r, il])
+        slope = (float(s[r, ir]) - left) / (ir - il)
         base = left + slope * (xi - il)
-        top = (float(row[xi]) - base) / (base + floor)
+        top = (float(s[r, xi]) - base) / (base + floor)
         if not top > 0:
             out[i] = xi
             continue
@@ -190,7 +187,7 @@ def shaded_centroids(s, x, y, row0, reach, floor):
             k = xi + sign
             while il < k < ir:
                 base = left + slope * (k - il)
-                q = (float(row[k]) - base) / (base + floor) - level
+                q = (float(s[r, k]) - base) / (base + floor) - level
                 if not q > 0:
                     break
                 num += (k - xi) * q
