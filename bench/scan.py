@@ -25,6 +25,7 @@ import json
 import statistics
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -66,10 +67,11 @@ def calibrated_for(cache: Path, stripes: int, size: tuple[int, int], poses: int 
 
 
 def evaluate(cap: Path, view: str, ambient: bool = False, cal=None, gamma: float | None = None,
-             linearise: bool = False) -> dict:
+             linearise: bool = False, frame: Callable[[np.ndarray], np.ndarray] | None = None) -> dict:
     """The figures of one view; with ``ambient``, scanned with its stripes-off image too; ``cal`` : the
     calibration to scan with (default: the simulator's true one); with ``gamma``, the images encoded with
-    that display gamma (``display_encoded``), and with ``linearise`` the calibration's ``camera_gamma`` set to it."""
+    that display gamma (``display_encoded``), and with ``linearise`` the calibration's ``camera_gamma`` set to it;
+    ``frame`` : a function applied to the stripe image before the scan (``bench/frames.py``)."""
     cal = cal or load_calibration(cap / "truth" / "truth.json")
     if gamma and linearise:
         cal = replace(cal, gamma=gamma)
@@ -79,7 +81,9 @@ def evaluate(cap: Path, view: str, ambient: bool = False, cal=None, gamma: float
         img = read_image(cap / "scan" / name)
         return display_encoded(img, gamma) if gamma else img
 
-    r = scan(image(f"{view}.png"), cal, view, ambient=image(f"{view}_ambient.png") if ambient else None)
+    stripes = image(f"{view}.png")
+    r = scan(stripes if frame is None else frame(stripes), cal, view,
+             ambient=image(f"{view}_ambient.png") if ambient else None)
     t = dict(np.load(cap / "truth" / f"{view}_stripes.npz"))
     tk, kind = match_crossings(r.scene_uv, t)
     on_animal = kind == ANIMAL
