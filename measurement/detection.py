@@ -306,9 +306,7 @@ def stripe_level(g: np.ndarray, params: DetectionParams, noise: float, step: int
     w = g.shape[1]
     rows = g[::step]
     s = cv2.GaussianBlur(rows, (0, 0), sigmaX=params.sigma_x * max(w / 3072.0, 0.5), sigmaY=0.01)
-    bg = cv2.erode(s, np.ones((1, _scaled(params.background_px, w, odd=True)), np.uint8))
-    peak = cv2.dilate(s, np.ones((1, 2 * _scaled(params.peak_px, w) + 1), np.uint8))
-    contrast = cv2.subtract(s, bg)
+    _, contrast, peak = _background_and_peaks(s, params, w)
     floor = int(max(params.noise_k * noise, 1.0))  # contrast above it: integers above the floor's whole part
     at = cv2.bitwise_and(cv2.compare(s, peak, cv2.CMP_EQ), cv2.threshold(contrast, floor, 255, cv2.THRESH_BINARY)[1])
     counts = cv2.calcHist([contrast], [0], at, [256], [0, 256]).ravel()
@@ -378,9 +376,7 @@ def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams, faint:
     a0, b0 = max(a - margin, 0), min(b + margin, h)
     s = cv2.GaussianBlur(g[a0:b0], (0, 0), sigmaX=params.sigma_x * max(w / 3072.0, 0.5), sigmaY=sigma_y)
     s = s[a - a0:b - a0]
-    bg = cv2.erode(s, np.ones((1, _scaled(params.background_px, w, odd=True)), np.uint8))
-    contrast = cv2.subtract(s, bg)
-    peak = cv2.dilate(s, np.ones((1, 2 * _scaled(params.peak_px, w) + 1), np.uint8))
+    bg, contrast, peak = _background_and_peaks(s, params, w)
     low = params.weak_contrast if params.weak_contrast > 0 else params.min_contrast
     if faint > 0:
         low = min(low, faint)
@@ -400,6 +396,16 @@ def _band_centres(g: np.ndarray, a: int, b: int, params: DetectionParams, faint:
         shaded[sel] = _kernels.shaded_centroids(s, x[sel], y[sel], a, _scaled(params.shade_px, w),
                                                 float(params.shade_floor))
     return x, y, u, contrast_at, width, flank, shaded
+
+
+def _background_and_peaks(s: np.ndarray, params: DetectionParams, w: int) -> tuple[np.ndarray, ...]:
+    """Of the smoothed rows s (R, W) uint8 of an image ``w`` px wide: the local background (the minimum over
+    ``background_px`` columns), the contrast s - background and the maximum over ``peak_px`` columns each side
+    (a peak is where s equals it), all (R, W) uint8."""
+    bg = cv2.erode(s, np.ones((1, _scaled(params.background_px, w, odd=True)), np.uint8))
+    contrast = cv2.subtract(s, bg)
+    peak = cv2.dilate(s, np.ones((1, 2 * _scaled(params.peak_px, w) + 1), np.uint8))
+    return bg, contrast, peak
 
 
 def shaded_centre(profile: np.ndarray, peak: int, floor: float = 4.0) -> float:

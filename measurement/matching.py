@@ -340,10 +340,10 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
         is_bg = segment_mask(seg, bg_labels)
         tips = _tips(c, rays, planes, seg, labels, is_bg, long_seg, left, right, bg_planes, spacing_mm,
                      params.depth_range_mm, by_segment)
-        if tips:  # the tip's stripe broken along its length goes on from it (as ``_continue_along`` above)
+        if tips:
+            # the tip's stripe broken along its length goes on from it (as ``_continue_along`` above)
             tips.update(_continue_along(c, rays, planes, seg, {**seg_label, **tips}, fg_mask, set(tips), link,
                                         0.25 * spacing_mm, lit, ends=ends))
-        if tips:
             seg_label.update(tips)
             tip = segment_mask(seg, tips)[seg]
             labels[tip] = label_table(seg, tips)[seg[tip]]

@@ -272,7 +272,7 @@ def test_a_frame_exposed_half_as_long_scans_as_the_full_one(small_capture, truth
     from measurement.detection import STRIPE_LEVEL, stripe_level, to_gray8
 
     img = read_image(small_capture / "scan" / "side.png")
-    dark = (img // 2).astype(np.uint8)
+    dark = img // 2
     assert stripe_level(to_gray8(dark), DetectionParams(), 0.0) < 0.7 * STRIPE_LEVEL
     full, half = scan(img, truth_cal, "side"), scan(dark, truth_cal, "side")
     t = dict(np.load(small_capture / "truth" / "side_stripes.npz"))
