@@ -106,8 +106,8 @@ def row_neighbours(c: Centres, order: np.ndarray | None = None) -> tuple[np.ndar
 
 
 def smooth_along_stripes(c: Centres, segment: np.ndarray, labels: np.ndarray, jump_px: float, half: int = 2,
-                         outlier_px: float = 1.0, reach: int = 6, gap: int = 3, order: np.ndarray | None = None
-                         ) -> tuple[np.ndarray, np.ndarray]:
+                         outlier_px: float = 1.0, reach: int = 6, gap: int = 3, order: np.ndarray | None = None,
+                         noisy: tuple[float, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Each labelled centre's column (``c.position``: the shaded centroid where detection measured it)
     smoothed along its stripe: the value at its row of a straight line fitted to the centres of its run
     within ``reach`` rows (the surface is smooth over a couple of millimetres along a stripe, fur noise is
@@ -117,7 +117,9 @@ def smooth_along_stripes(c: Centres, segment: np.ndarray, labels: np.ndarray, ju
     goes on into: one that starts at most ``gap`` rows after it ends, within ``jump_px`` per row of its last
     centre's column (linking cuts a stripe where its brightness jumps, as at fur's dark dropouts, and left a
     fifth of a fur side view's segments too short to smooth: points beyond 2 mm 0.77 -> 0.47 %, seed 4, 40
-    stripes). Runs under 2 ``half`` + 1 centres are left as they are.
+    stripes). Runs under 2 ``half`` + 1 centres are left as they are. With ``noisy`` (px, rows), a run whose
+    kept centres lie a median of more than that many px off its line is smoothed again over that many rows
+    (``pipeline.NOISY_RUN_PX``: fur's centres scatter about their stripe, a clean surface's hardly do).
 
     segment : (M,) linked segment id; labels : (M,) stripe index, -1 unlabelled (left as it is, flagged False)
     order : ``segment_rows(segment, c.v)`` (M,), when known
@@ -150,6 +152,14 @@ def smooth_along_stripes(c: Centres, segment: np.ndarray, labels: np.ndarray, ju
     chain_starts = np.r_[0, np.flatnonzero(root[by_chain][1:] != root[by_chain][:-1]) + 1, len(by_chain)]
     starts = np.r_[0, np.cumsum(count)][chain_starts]
     _kernels.smooth_runs(chained, starts, c.v, position, half, reach, outlier_px, u, keep)
+    if noisy is not None:
+        scatter = _kernels.run_scatter(chained, starts, position, u, keep, 2 * half + 1)
+        loud = np.flatnonzero(scatter > noisy[0])
+        if len(loud):  # those runs' centres laid out one run after another, smoothed over the longer reach
+            count = np.diff(starts)[loud]
+            sub = chained[spans(starts[:-1][loud], count)]
+            _kernels.smooth_runs(sub, np.r_[0, np.cumsum(count)], c.v, position, half, noisy[1], outlier_px, u,
+                                 keep.copy())
     return u, keep
 
 

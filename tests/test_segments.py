@@ -68,3 +68,21 @@ def test_an_outlier_is_flagged_and_read_as_its_median_and_unlabelled_centres_are
     assert not keep[10] and keep[:60].sum() == 59
     np.testing.assert_array_equal(s[60:], u[60:])  # unlabelled, and a run too short to smooth
     assert not keep[60:70].any() and keep[70:].all()
+
+
+def test_a_noisy_stripe_is_smoothed_over_the_longer_reach_and_a_clean_one_is_left_as_it_was():
+    """Fur's centres scatter about their stripe (0.15-0.24 px median off the short line on the simulator's
+    fur views): such a run takes the line over ``noisy``'s rows, a clean curving one keeps the short line."""
+    rng = np.random.default_rng(5)
+    v = np.arange(400)
+    bend = 600.0 + 60.0 * np.sin(v / 300.0)  # a stripe curving over a rounded body
+    fur = bend + rng.normal(0, 0.35, len(v))
+    clean = bend + 300.0 + rng.normal(0, 0.05, len(v))
+    c = _centres(np.r_[fur, clean], np.r_[v, v])
+    segment, labels = np.repeat([0, 1], 400), np.repeat([3, 9], 400)
+    short, kept = smooth_along_stripes(c, segment, labels, 2.0, reach=6)
+    both, keep = smooth_along_stripes(c, segment, labels, 2.0, reach=6, noisy=(0.13, 12))
+    rms = lambda s, truth: float(np.sqrt(np.mean((s - truth) ** 2)))  # noqa: E731
+    assert rms(both[:400], bend) < 0.85 * rms(short[:400], bend)
+    assert np.array_equal(both[400:], short[400:])
+    assert np.array_equal(keep, kept)  # the specks flagged are the same

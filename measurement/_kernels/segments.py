@@ -240,6 +240,28 @@ def smooth_runs(order, starts, v, u, half, reach, outlier_px, out, keep):
 
 
 @compiled
+def run_scatter(order, starts, u, smooth, keep, least):
+    """Per run ``order[starts[r]:starts[r + 1]]`` (R,): the median distance (px) of its kept (``keep`` (M,))
+    columns ``u`` (M,) from their smoothed ones ``smooth`` (M,); 0 for a run with fewer than ``least`` kept
+    (``segments.smooth_along_stripes``' noisy runs)."""
+    out = np.zeros(len(starts) - 1)
+    longest = 0
+    for r in range(len(starts) - 1):
+        longest = max(longest, starts[r + 1] - starts[r])
+    d = np.empty(longest)
+    for r in range(len(starts) - 1):
+        n = 0
+        for t in range(starts[r], starts[r + 1]):
+            i = order[t]
+            if keep[i]:
+                d[n] = abs(u[i] - smooth[i])
+                n += 1
+        if n >= least:
+            out[r] = np.median(d[:n])
+    return out
+
+
+@compiled
 def crowded(row, col, h, size):
     """Whether each centre's pixel (``row``, ``col``) (M,) int64 has at least ``size / 2`` marked pixels in
     the ``size`` x ``size`` square OpenCV's unnormalised ``boxFilter`` sums there (anchor ``size // 2``,
