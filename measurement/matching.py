@@ -324,7 +324,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
                                              ends=ends))
     if fg_labels and small:  # isolated small pieces (a head seen from above) hemmed in by what is placed
         seg_label.update(_place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, cl, lit, table,
-                                      from_above=from_above, bg_planes=bg_planes))
+                                      from_above=from_above, bg_planes=bg_planes if view == "side" else None))
     # the whole animal weighed again, with what joined after the first piece (not after a shallow reading:
     # the grown union's stray conflicts outweigh such a ramp; a spot cow seen from above was placed right
     # and then moved one stripe)
@@ -1052,11 +1052,14 @@ def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, know
     """Labels for the small pieces that growth from their neighbours did not reach: each is placed only
     where the background and the pieces already labelled hem it in on both sides (the bottom of a V in
     its conflict curve); the others stay unlabelled. A piece growth reached in part is read from that part
-    (``_anchored``): seen from above all of it, with its rest on at most ``SMALL_FLOOR`` of lit cells; from
-    the side or end-on only with the background ``bg_planes`` known, where its rest conflicts with at most
-    ``SIDE_ANCHOR_FLOOR`` of them, and only its segments no index puts on the floor or wall
-    (``background_like``), if ``SIDE_ANCHOR_MIN`` centres or more are left. ``known`` (M,) labels (a subset
-    of ``seg_label``'s) whose cells ``lit`` holds; ``table`` : the ``BinTable`` the conflict curves share."""
+    (``_anchored``). Seen from above: all of it, where its rest lands on at most ``SMALL_FLOOR`` of lit
+    cells. From the side (``bg_planes`` given): where its rest lands on at most ``SIDE_ANCHOR_FLOOR`` of
+    them, and only its segments that no index puts on the floor or wall (``background_like``), if at least
+    ``SIDE_ANCHOR_MIN`` centres are left. End-on (``label_centres`` passes no ``bg_planes`` for front and
+    back views) it is left as it is: there the side reading moved two views already wrong (the 1536 px
+    40-stripe clean back view 65.3 -> 64.5 % right, the 3072 px 50-stripe clean one 71 -> 80 % labelled
+    at 1 % right). ``known`` (M,) labels (a subset of ``seg_label``'s) whose cells ``lit`` holds;
+    ``table`` : the ``BinTable`` the conflict curves share."""
     out: dict[int, int] = {}
     cl = _labels_of(seg, seg_label, long_seg)
     # labels only join seg_label, never change: the centres labelled since add their cells
@@ -1110,7 +1113,7 @@ def _anchored(rays, planes, cl, rel, seg, idx, known_here, n, lit, table: BinTab
     length 19.5 % short). On the bench cache's 272 views (``bench/cache.py``, 2026-11-23): 3837 more of the
     animal's centres labelled right, in 16 top views (a weighing platform's 3072 px top views: length 374 ->
     437 mm), and 331 wrong, in two top views already wrong (67 and 73 % right); no view's placement
-    changed. From the side or end-on growth also reaches a few segments of wall or floor beside the
+    changed. From the side (and end-on) growth also reaches a few segments of wall or floor beside the
     outline, and reading the rest of such a piece from them as above labelled 600-2700 background centres
     in three side views and took a back view from 62 to 55 % right, for no view gained; there
     ``max_conflict`` is ``SIDE_ANCHOR_FLOOR`` and ``_place_small`` leaves the floor and wall alone
