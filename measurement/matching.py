@@ -1105,7 +1105,7 @@ def _anchored(rays, planes, cl, rel, seg, idx, known_here, n, lit, table: BinTab
     """The offset of a small piece (centres ``idx`` (K,), relative labels ``rel`` (S,) per
     segment) part of which growth from the placed pieces labelled (``known_here`` (K,) bool, labels in
     ``cl`` (M,)): the one at least ``ANCHOR_SHARE`` of those labels agree on, if the rest of the piece lands
-    there on no more than ``SMALL_FLOOR`` of lit cells and within the pattern (None otherwise).
+    there on no more than ``max_conflict`` of lit cells and within the pattern (None otherwise).
 
     Growth stops at the first row pair it doubts; the piece's own relative labels carry its reading on. A
     head seen from above, joined to the body through a neck whose faint stripes growth only partly crossed,
@@ -1123,8 +1123,8 @@ def _anchored(rays, planes, cl, rel, seg, idx, known_here, n, lit, table: BinTab
     the bench cache's 240 views 427 more animal centres right, 480 more wrong (433 in three views placed
     wrong already), no view's placement changed. The same render at 1536 px as rendered lands its rest on
     1.0 % of lit cells (length -26 -> -1.3 %); a seed-4 side view's rest of fur specks and floor, read one
-    to five stripes off, on 3.6 %: ``SIDE_ANCHOR_FLOOR`` 0.02 (0.01 and 0.03 label the 320 cached views
-    alike). ``max_conflict`` : the largest share of lit cells the rest of the piece may land on."""
+    to five stripes off, on 3.6 %: ``SIDE_ANCHOR_FLOOR`` 0.02 (0.01 and 0.03 label the main cache's 240 views
+    and their 80 blurred copies alike). ``max_conflict`` : the largest share of lit cells the rest of the piece may land on."""
     implied = cl[idx[known_here]] - rel[seg[idx[known_here]]]
     offs, counts = np.unique(implied, return_counts=True)
     best = int(np.argmax(counts))
