@@ -106,6 +106,7 @@ def variants(cache: Path, out: Path) -> None:
     """Write ``variants``' views into ``out`` (see the module docstring); views already there are kept."""
     import cv2
 
+    from bench.frames import blur
     from bench.scan import capture_for
 
     out.mkdir(parents=True, exist_ok=True)
@@ -121,9 +122,7 @@ def variants(cache: Path, out: Path) -> None:
             for view in json.loads((cap / "truth" / "truth.json").read_text()).get("views", {}):
                 src, to = cap / "scan" / f"{view}.png", dst / "scan" / f"{view}.png"
                 if src.exists() and not to.exists():
-                    img = read_image(src).astype(np.float64)
-                    soft = np.clip(np.rint(cv2.GaussianBlur(img, (0, 0), sigma)), 0, 255).astype(np.uint8)
-                    cv2.imwrite(str(to), soft)
+                    cv2.imwrite(str(to), blur(read_image(src), sigma))
     for seed in VARIANT_SEEDS:
         for stripes in (40, 50):
             for fur in (True, False):

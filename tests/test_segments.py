@@ -82,7 +82,9 @@ def test_a_noisy_stripe_is_smoothed_over_the_longer_reach_and_a_clean_one_is_lef
     segment, labels = np.repeat([0, 1], 400), np.repeat([3, 9], 400)
     short, kept = smooth_along_stripes(c, segment, labels, 2.0, reach=6)
     both, keep = smooth_along_stripes(c, segment, labels, 2.0, reach=6, noisy=(0.13, 12))
-    rms = lambda s, truth: float(np.sqrt(np.mean((s - truth) ** 2)))  # noqa: E731
-    assert rms(both[:400], bend) < 0.85 * rms(short[:400], bend)
+    def rms(s: np.ndarray) -> float:
+        return float(np.sqrt(np.mean((s - bend) ** 2)))
+
+    assert rms(both[:400]) < 0.85 * rms(short[:400])
     assert np.array_equal(both[400:], short[400:])
     assert np.array_equal(keep, kept)  # the specks flagged are the same
