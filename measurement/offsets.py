@@ -306,6 +306,7 @@ def conflict_curve(rays, planes, cl, r, idx, n, bins: float = 0.002, lit: np.nda
     return conflicts, beyond
 
 
+EDGE_FLOOR = 0.2  # a steady shallow ramp's floor, as a share of its fall, where the pattern's edge bounds it
 _SPLIT_CELLS = 100_000  # centre-offset pairs above which a conflict curve's offsets are shared by both cores
 
 
@@ -374,7 +375,11 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
     blob seen from above or a sitting rabbit hides most of its shadow's lit edge) still places the piece
     when it is steady (``steady_ramp``): then at about its minimum (a tenth of a step of residue
     tolerated, not half), since a residue of half such a step is already the whole next column's
-    conflicts. ``report`` (if given) gets "shallow": whether it was.
+    conflicts. Where the next offset past that minimum would put more than ``pattern_edge`` of the piece
+    beyond the pattern, the edge bounds the piece as the ramp does, and the floor may keep ``EDGE_FLOOR``
+    of the ramp's fall (the residue of the animal's end stripes; a spot cow seen from above, filling a
+    50-stripe pattern to its last stripe at 1536 px: 0.0012 after a fall of 0.0086, unplaced before).
+    ``report`` (if given) gets "shallow": whether it was.
 
     With ``beside_placed`` or ``from_above`` a V-shaped curve (``sharp_minimum``) is read at its bottom. From
     above, on 326 rendered views (2026-11-22): 10 top views placed right that were one stripe off
@@ -405,7 +410,10 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
             i = int(np.argmin(np.where(possible, vals, np.inf)))
             step = _ramp_step(vals, i, ramp_steps)
     if step <= 0.005:  # no ramp: nothing bounds the piece on the lit side, unless a steady shallow one does
-        if not (shallow and possible[i] and steady_ramp(vals, i)):
+        # a ramp that runs into the pattern's edge is bounded there on both sides: its floor may keep the
+        # residue of the animal's end stripes (EDGE_FLOOR of the fall, not a tenth)
+        at_pattern_edge = i + 1 < len(vals) and not possible[i + 1]
+        if not (shallow and possible[i] and steady_ramp(vals, i, floor=EDGE_FLOOR if at_pattern_edge else 0.1)):
             return None
         residue = 0.1
         if report is not None:
@@ -446,15 +454,15 @@ def choose_offset(conflicts: dict[int, float], beyond: dict[int, tuple[float, fl
     return int(best)
 
 
-def steady_ramp(vals: np.ndarray, i: int, run: int = 5, rise: float = 0.004) -> bool:
+def steady_ramp(vals: np.ndarray, i: int, run: int = 5, rise: float = 0.004, floor: float = 0.1) -> bool:
     """Whether the curve ``vals`` (conflicts rising toward lower indices) comes down to its minimum at
     ``i`` without a bump over the last ``run`` steps, falling by at least ``rise`` on them to a floor
-    under a tenth of that fall."""
+    under ``floor`` of that fall."""
     if i < run:
         return False
     part = vals[i - run:i + 1]
     fall = float(part[0] - part[-1])
-    return bool((np.diff(part) <= 0).all() and fall >= rise and part[-1] <= 0.1 * fall)
+    return bool((np.diff(part) <= 0).all() and fall >= rise and part[-1] <= floor * fall)
 
 
 def _ramp_step(vals: np.ndarray, i: int, ramp_steps: int) -> float:

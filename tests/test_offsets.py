@@ -123,6 +123,24 @@ def test_a_steady_shallow_ramp_places_the_piece_at_its_minimum_when_asked():
     assert choose_offset(flat, beyond, shallow=True) is None
 
 
+
+def test_a_steady_shallow_ramp_that_runs_into_the_patterns_edge_keeps_its_end_stripes_residue():
+    """A spot cow seen from above fills a 50-stripe pattern to its last stripe (1536 px): its conflicts
+    fall steadily to 0.0012 at the true offset, 26, and every offset past it puts over 2 % of the piece
+    beyond the last stripe. The edge bounds the piece there as the ramp does on the other side, so the
+    floor may keep a fifth of the fall (the animal's end stripes), not the tenth a free run must reach;
+    the same curve with room past 26 is refused as before."""
+    from measurement.offsets import choose_offset
+
+    conflicts = {16: 0.0108, 17: 0.0106, 18: 0.0108, 19: 0.0108, 20: 0.0108, 21: 0.0098, 22: 0.0089,
+                 23: 0.0072, 24: 0.0054, 25: 0.0023, 26: 0.0012, 27: 0.0007, 28: 0.0, 29: 0.0, 30: 0.0005}
+    past = {o: (0.0, max(0.0, 0.0235 * (o - 26))) for o in conflicts}
+    assert choose_offset(conflicts, past, shallow=True, from_above=True) == 26
+    assert choose_offset(conflicts, past, from_above=True) is None  # not without the shallow reading
+    room = {o: (0.0, 0.0) for o in conflicts}
+    assert choose_offset({**conflicts, 27: 0.0012, 28: 0.0012, 29: 0.0012, 30: 0.0012}, room, shallow=True,
+                         from_above=True) is None
+
 def test_a_small_piece_that_conflicts_wherever_it_goes_is_not_placed():
     """A V whose bottom still puts a tenth of the piece on lit cells is a piece whose relative indices
     are wrong (a mislinked stub at the pattern's edge): ``max_floor`` refuses it."""
