@@ -33,11 +33,15 @@ def main() -> None:
     ap.add_argument("--cache", default="/tmp/bodyscan-bench")
     ap.add_argument("--unseen", action="store_true", help="the spot and bunny renders instead (a fresh probe)")
     args = ap.parse_args()
+    renders = UNSEEN if args.unseen else RENDERS
+    missing = [p for p in dict.fromkeys(Path(args.meshes) / m for m, *_ in renders) if not p.exists()]
+    if missing:  # (the default is beside the checkout: a worktree elsewhere must name them)
+        ap.error(f"no mesh {missing[0]}: pass --meshes DIR (the shared meshes, e.g. /work/shared/meshes)")
     size = tuple(int(v) for v in args.size.split("x"))
     rights: list[float] = []
     print("render                    view  labelled  right    pieces (centres: chosen offset / true)")
     prefix = "newanimal" if args.unseen else "animal"
-    for mesh, stripes, fur, seed in UNSEEN if args.unseen else RENDERS:
+    for mesh, stripes, fur, seed in renders:
         name = f"{Path(mesh).stem}-{stripes}-{'fur' if fur else 'clean'}-{seed}"
         cap = cached_capture(Path(args.cache) / f"{prefix}-{size[0]}x{size[1]}-{name}", stripes=stripes,
                              size=size, seed=seed, fur=fur, mesh=str(Path(args.meshes) / mesh))
