@@ -337,7 +337,9 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
             seg_label = {**bg_labels, **{s: k + shift for s, k in fg.items() if 0 <= k + shift < n}}
             if _TRACE is not None:  # (no centres, no relative labels, the shift of every animal label)
                 _TRACE.append((None, None, shift))
-    if fg_labels and from_above:  # a block slipped inside the animal (a raised head behind a hidden shoulder)
+    # a block slipped inside the animal (a raised head behind a hidden shoulder), from above only: from the side
+    # the same reading moved floor blocks that growth had labelled as the animal (three high-camera views)
+    if fg_labels and from_above:
         fg = {s: k for s, k in seg_label.items() if s not in bg_labels}
         moved = _part_shifts(c, rays, planes, seg, fg, long_seg, left, right, bg_cl, bg_lit, table, n, bg_planes,
                              footprint)
