@@ -1056,6 +1056,7 @@ def _lit_share(rays, planes, ii, k, lit) -> float:
 TIP_NEAR = 4.0  # a tail tip's points lie within this many stripe spacings of the end stripe's (median)
 TIP_OFF_FLOOR_MM = 5.0  # and at least this far off the floor and wall (90 % of them)
 TIP_FLOOR_ROWS = 0.25  # a tip shares at most this share of its rows with the floor's stripe of its index
+TIP_INSIDE = 2  # stripes inside each end stripe whose next one out a tip may take too
 TIP_INNER = 0.5  # a segment with an unlabelled stripe beyond more than this share of its centres is no tip
 
 
@@ -1094,6 +1095,15 @@ def _tips(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray, lon
     continues the animal's (``label_centres``). With both, on the 272 cached views: lengths within 1 %
     79 -> 81 of the 208 placed (8 lengths moved, every one toward the truth: seed 8's clean top view
     -8.70 -> +0.68 %, a narrow rig's -6.81 -> +0.12 %), 79 more centres right, 18 more wrong.
+
+    The stripes up to ``TIP_INSIDE`` inside each end stripe are read for a tip as well, innermost first (a
+    segment one of them took keeps that label): a stub can hold the outermost labels while the tip's own
+    stripe is unlabelled (the five seeds' 40-stripe clean top view of seed 12 at 3072 px: stripes 0 and 1 held
+    by 11 floor centres and a 7-centre stub at the outline, the tip's stripe 1 unlabelled, length -9.03 ->
+    +0.07 %; a 1536 px weighing platform's top view -4.89 -> -0.56 %). On 256 cached views (2026-12-02):
+    lengths within 1 % 83 -> 87 of the 214 placed, 176 animal centres more right and 14 more wrong, four
+    lengths 0.1-0.4 points further off (one of them still within 1 %); 1 stripe inside gives 78 of the 232
+    views before the shared meshes, 2 and 3 give 80 (3: 25 floor centres more wrong, against 14).
     """
     from scipy.spatial import cKDTree
 
@@ -1106,8 +1116,12 @@ def _tips(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray, lon
     reach = 4.0 * (float(c.u.max()) - float(c.u.min())) / n  # a few stripe periods, pixels
     height = int(c.v.max()) + 1
     out: dict[int, int] = {}
-    for end, k in ((first, first - 1), (last, last + 1)):
-        if not 0 <= k < n:
+    # the end stripes and the TIP_INSIDE stripes inside each, innermost first: a stub of floor or of the
+    # outline can hold the animal's outermost labels while the tip's own stripe is still unlabelled
+    ends = [(first + d, first + d - 1) for d in range(TIP_INSIDE, -1, -1)]
+    ends += [(last - d, last - d + 1) for d in range(TIP_INSIDE, -1, -1)]
+    for end, k in ends:
+        if not 0 <= k < n or not (animal == end).any():
             continue
         mine = np.flatnonzero(animal == end)
         # only segments within a few stripe periods of the end stripe's columns can be its neighbours (whole)
@@ -1154,7 +1168,9 @@ def _tips(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray, lon
             if claimed[rows_f[a:b]].any():
                 continue
             claimed[rows_f[a:b]] = True
-            if not inner:  # (one with more of the animal beyond it holds its rows, but is no tip)
+            # (one with more of the animal beyond it holds its rows, but is no tip; a segment an inner stripe
+            # took keeps that label)
+            if not inner and int(seg[free[a]]) not in out:
                 out[int(seg[free[a]])] = k
     return out
 
