@@ -1121,9 +1121,9 @@ def _tips(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray, lon
     ends = [(first + d, first + d - 1) for d in range(TIP_INSIDE, -1, -1)]
     ends += [(last - d, last - d + 1) for d in range(TIP_INSIDE, -1, -1)]
     for end, k in ends:
-        if not 0 <= k < n or not (animal == end).any():
-            continue
         mine = np.flatnonzero(animal == end)
+        if not 0 <= k < n or len(mine) == 0:
+            continue
         # only segments within a few stripe periods of the end stripe's columns can be its neighbours (whole)
         near = free_all & (c.u >= float(c.u[mine].min()) - reach) & (c.u <= float(c.u[mine].max()) + reach)
         touched = np.zeros(seg.max() + 1, bool)
