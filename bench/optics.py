@@ -4,7 +4,7 @@ a white, a speckled (concrete) or a tiled floor, a feed box behind the animal, a
 platform under the animal, the rails of a chute in front of it, and frames that went through JPEG
 compression.
 
-    python bench/optics.py [--size 1536x1024] [--cache /tmp/bodyscan-bench] [--seed 4]
+    python bench/optics.py [--size 1536x1024] [--cache /tmp/bodyscan-bench] [--seed 4] [--only wide,thin]
 
 An independent renderer will differ from ours in exactly these ways, so the figures here say how much of
 the scan's accuracy is tuned to the reference optics. Per variant and view: the share of the animal's
@@ -82,6 +82,7 @@ def main() -> None:
     ap.add_argument("--size", default="1536x1024")
     ap.add_argument("--cache", default="/tmp/bodyscan-bench")
     ap.add_argument("--seed", type=int, default=4)
+    ap.add_argument("--only", default=None, help="comma-separated substrings: the variants whose names hold one")
     args = ap.parse_args()
     size = tuple(int(v) for v in args.size.split("x"))
     cache = Path(args.cache)
@@ -90,6 +91,8 @@ def main() -> None:
           "   pieces (centres: chosen offset / true)")
     good = total = 0
     for name, variant in VARIANTS.items():
+        if args.only and not any(part in name for part in args.only.split(",")):
+            continue
         cap = capture_for(cache, name, variant, size, args.seed)
         for view in VIEWS:
             total += 1

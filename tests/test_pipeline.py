@@ -612,3 +612,49 @@ def _view_and_truth(cap, view: str):
     on = t["kind"] == 5
     ref = measure(t["points"][on], t["stripe"][on], np.rint(t["uv"][on, 1]).astype(np.int64), view)
     return load_calibration(cap / "truth" / "truth.json"), read_image(cap / "scan" / f"{view}.png"), t, ref
+
+
+def _column_errors(r, truth: dict) -> np.ndarray:
+    """|column| (px) from each animal point of the scan ``r`` to the true crossing nearest it in its row (the
+    points within 3 px of one)."""
+    order = np.lexsort((truth["uv"][:, 0], np.rint(truth["uv"][:, 1])))
+    key = np.rint(truth["uv"][order, 1]) * 1e5 + truth["uv"][order, 0]
+    q = np.rint(r.uv[:, 1]) * 1e5 + r.uv[:, 0]
+    idx = np.clip(np.searchsorted(key, q), 1, len(key) - 1)
+    cand = np.stack([idx - 1, idx], 1)
+    d = np.abs(key[cand] - q[:, None])
+    best = cand[np.arange(len(q)), d.argmin(1)]
+    du = d.min(1)
+    return du[(du < 3) & (truth["kind"][order][best] == 5)]
+
+
+def test_under_stripes_twice_as_wide_the_shaded_centres_look_for_the_room_light_farther_out(tmp_path, monkeypatch):
+    """A projector whose stripes are twice as wide (the optics bench's variant, at 1536 px): the fixed reach of
+    the shaded centroid ended on the stripes' own flanks. Widened with the frame's median stripe width, the
+    animal's points lie nearer their true crossings; at the reference width nothing changes."""
+    from dataclasses import replace
+
+    import measurement.detection as det
+    from measurement.simulate.capture import write_capture
+    from measurement.simulate.rig import Rig, default_rig
+
+    rig = default_rig((1536, 1024), 40)
+    cap = write_capture(tmp_path / "wide", size=(1536, 1024), seed=4, poses=0, scenes=("side",),
+                        rig=Rig(rig.intrinsics, replace(rig.projector, sigma=2 * rig.projector.sigma)))
+    cal = load_calibration(cap / "truth" / "truth.json")
+    img = read_image(cap / "scan" / "side.png")
+    truth = dict(np.load(cap / "truth" / "side_stripes.npz"))
+    c = detect_centres(img)
+    assert det._shade_for_width(DetectionParams(), c, img.shape[1]).shade_px > DetectionParams().shade_px
+    widened = _column_errors(scan(img, cal, "side"), truth)
+    monkeypatch.setattr(det, "SHADE_WIDER", np.inf)
+    fixed = _column_errors(scan(img, cal, "side"), truth)
+    assert np.median(widened) < 0.8 * np.median(fixed)
+    assert np.mean(widened < 1.0) > np.mean(fixed < 1.0) + 0.05
+
+
+def test_at_the_reference_stripe_width_the_shaded_centres_keep_their_reach(small_capture):
+    import measurement.detection as det
+
+    img = read_image(small_capture / "scan" / "side.png")
+    assert det._shade_for_width(DetectionParams(), detect_centres(img), img.shape[1]) is None
