@@ -658,3 +658,15 @@ def test_at_the_reference_stripe_width_the_shaded_centres_keep_their_reach(small
 
     img = read_image(small_capture / "scan" / "side.png")
     assert det._shade_for_width(DetectionParams(), detect_centres(img), img.shape[1]) is None
+
+
+def test_stripes_much_wider_than_the_detector_is_set_for_are_named_in_the_warnings(small_capture, truth_cal):
+    from measurement.matching import Labels
+    from measurement.pipeline import _warnings
+
+    r = scan(read_image(small_capture / "scan" / "side.png"), truth_cal, "side")
+    assert r.measurements["stripe_width_px"] > 0 and not any("as wide as" in w for w in r.measurements["warnings"])
+    meas = {"body_length_mm": 500.0, "body_height_mm": 280.0, "stripe_width_px": 11.0}
+    warned = _warnings(meas, Labels(np.zeros(3, np.int64), None, None, 100, 0), 11.0 / 8.0)
+    assert len(warned) == 1 and "the stripes are 1.4 times as wide as the scan is made for (11 px" in warned[0]
+    assert _warnings(meas, Labels(np.zeros(3, np.int64), None, None, 100, 0), 1.0) == []
