@@ -212,6 +212,10 @@ def _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm):
     return counts / np.diff(bounds)[:, None], idx, bounds
 
 
+LOOSE_SHARE = 0.05  # ``claim_background``: a segment this much short of the share is claimed only if it is
+LOOSE_FLATNESS = 2.0  # at most this many times as far off its plane as the labelled background's median
+
+
 def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, min_rows: int = 6,
                       share: float = 0.95, tol_mm: float = 5.0, flatness: float = 4.0) -> dict[int, int]:
     """Unlabelled segments that exactly one stripe index puts on a background plane (>= ``share`` of
@@ -239,11 +243,15 @@ def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, mi
     flatness_bg = second_core().submit(background_flatness, rays, planes, seg, seg_label, bg_planes)
     frac, idx, starts = _plane_fractions_per_segment(rays, planes, seg, sids, bg_planes, tol_mm)
     hits = frac >= share
-    one = np.nonzero(hits.sum(axis=1) == 1)[0]
+    # no index at ``share`` but exactly one at LOOSE_SHARE less: held to LOOSE_FLATNESS instead of ``flatness``
+    near = frac >= share - LOOSE_SHARE
+    loose = (hits.sum(axis=1) == 0) & (near.sum(axis=1) == 1)
+    one = np.nonzero((hits.sum(axis=1) == 1) | loose)[0]
     if len(one) == 0:
         flatness_bg.result()
         return {}
-    k = hits[one].argmax(axis=1)
+    loose = loose[one]
+    k = np.where(loose, near[one].argmax(axis=1), hits[one].argmax(axis=1))
     # the claimed segments' median distance from each background plane at their index, judged against the
     # labelled background's noise on the plane they are nearest to
     claimed = np.zeros(len(sids), bool)
@@ -254,7 +262,8 @@ def claim_background(c, rays, planes, seg, seg_label, long_seg, bg_planes, n, mi
     dist = np.abs(points @ bg_planes[:, :3].T - bg_planes[:, 3])  # (K, P)
     medians = np.column_stack([_group_medians(dist[:, j], counts) for j in range(len(bg_planes))])
     nearest = medians.argmin(axis=1)
-    flat = medians[np.arange(len(one)), nearest] <= flatness * flatness_bg.result()[nearest]
+    most = np.where(loose, LOOSE_FLATNESS, flatness) * flatness_bg.result()[nearest]
+    flat = medians[np.arange(len(one)), nearest] <= most
     return dict(zip(sids[one][flat].tolist(), k[flat].tolist(), strict=True))
 
 
