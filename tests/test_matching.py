@@ -352,19 +352,26 @@ def test_a_floor_claim_must_be_as_flat_as_the_labelled_floor():
                             flatness=np.inf) == {3: 20, 4: 25}
 
 
+def _claim_rig(n: int = 40) -> tuple[int, np.ndarray, np.ndarray]:
+    """n light planes x = 10 k mm and a floor y = 500 mm, for the claims' tests."""
+    planes = np.column_stack([np.ones(n), np.zeros(n), np.zeros(n), 10.0 * np.arange(n)])
+    return n, planes, np.array([[0.0, 1.0, 0.0, 500.0]])
+
+
+def _floor_rays(k: int, z: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The rays (z = 1) through the points of light plane k at depths z and heights y (mm)."""
+    p = np.column_stack([np.full(len(z), 10.0 * k), y, z])
+    return p / p[:, 2:]
+
+
 def test_a_short_floor_piece_is_claimed_and_a_short_animal_piece_is_not():
     """A floor stripe's first rows at the foot of the wall are split off by the kink there: 6-14 rows.
     Unclaimed, they joined the animal's pieces and put floor points 8-25 mm off its surface into its cloud."""
     from measurement.background import claim_background
 
-    n = 40
-    planes = np.column_stack([np.ones(n), np.zeros(n), np.zeros(n), 10.0 * np.arange(n)])  # x = 10 k mm
-    floor = np.array([[0.0, 1.0, 0.0, 500.0]])  # y = 500 mm
+    n, planes, floor = _claim_rig()
     rng = np.random.default_rng(1)
-
-    def segment(k, z, y):
-        p = np.column_stack([np.full(len(z), 10.0 * k), y, z])
-        return p / p[:, 2:]
+    segment = _floor_rays
 
     long_z, short_z = np.linspace(1100, 1300, 40), np.linspace(1290, 1300, 8)
     rays = np.vstack([segment(k, long_z, 500 + rng.normal(0, 0.1, 40)) for k in (5, 6, 7)]
@@ -381,14 +388,9 @@ def test_a_wall_piece_with_a_few_stray_centres_is_claimed_if_it_is_as_flat_as_th
     claimed only at half the flatness a full claim may have, so a leg's piece near the floor is not."""
     from measurement.background import claim_background
 
-    n = 40
-    planes = np.column_stack([np.ones(n), np.zeros(n), np.zeros(n), 10.0 * np.arange(n)])  # x = 10 k mm
-    floor = np.array([[0.0, 1.0, 0.0, 500.0]])  # y = 500 mm
+    n, planes, floor = _claim_rig()
     rng = np.random.default_rng(2)
-
-    def segment(k, z, y):
-        p = np.column_stack([np.full(len(z), 10.0 * k), y, z])
-        return p / p[:, 2:]
+    segment = _floor_rays
 
     z = np.linspace(1100, 1300, 40)
     stray = np.zeros(25)
