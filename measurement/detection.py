@@ -255,14 +255,15 @@ SHADE_WIDER = 1.2  # a frame whose median stripe is this much wider has its shad
 
 
 def _shade_for_width(params: DetectionParams, c: Centres, w: int) -> DetectionParams | None:
-    """``params`` with ``shade_px`` widened in proportion to the frame's stripes where their median width
-    (``Centres.median_width``, pixels) exceeds ``SHADE_WIDER`` times ``SHADE_WIDTH_PX`` (scaled to a frame
-    ``w`` px wide), else None. The shaded centroid looks for the room light's level on each side of the
-    stripe within ``shade_px``; under wider stripes (another projector or focus: the optics bench's twice
-    the light's sigma reads 11 px against the reference's 8 at 3072 px) that reach ended on the stripe's own
-    flanks, and the line through them cut the profile off-centre: 85.5 % of the 40-stripe fur side view's
-    points within 2 mm, 90.9 % at the widened reach (99.6 % at the reference width, which is left as it
-    was: every frame up to the threshold keeps the fixed reach to the bit)."""
+    """``params`` with ``shade_px`` times the square of the frame's median stripe width (``Centres.median_width``,
+    pixels) over ``SHADE_WIDTH_PX`` (scaled to a frame ``w`` px wide) where that ratio exceeds ``SHADE_WIDER``,
+    else None. The shaded centroid looks for the room light's level on each side of the stripe within
+    ``shade_px``; under wider stripes (another projector or focus: the optics bench's twice the light's sigma
+    reads 11 px against the reference's 8 at 3072 px; the half-height width grows more slowly than the
+    tails, hence the square) that reach ended on the stripe's own flanks, and the line through them cut the
+    profile off-centre: 85.5 % of the 40-stripe fur side view's points within 2 mm, 91.5 % at the widened
+    reach (99.6 % at the reference width, which is left as it was: every frame up to the threshold keeps the
+    fixed reach to the bit)."""
     if params.shade_px <= 0 or len(c) == 0:
         return None
     nominal = SHADE_WIDTH_PX * max(w / 3072.0, 0.5)
