@@ -254,6 +254,12 @@ SHADE_WIDTH_PX = 8.0  # the stripe width (at half height, 3072 px) ``DetectionPa
 SHADE_WIDER = 1.2  # a frame whose median stripe is this much wider has its shaded centres taken again
 
 
+def stripe_width_ratio(c: Centres, w: int) -> float:
+    """The median width (``Centres.median_width``) of the stripes of a frame ``w`` px wide over
+    ``SHADE_WIDTH_PX`` scaled to that frame: 1 at the width the detector's windows were set for."""
+    return c.median_width / (SHADE_WIDTH_PX * max(w / 3072.0, 0.5))
+
+
 def _shade_for_width(params: DetectionParams, c: Centres, w: int) -> DetectionParams | None:
     """``params`` with ``shade_px`` times the square of the frame's median stripe width (``Centres.median_width``,
     pixels) over ``SHADE_WIDTH_PX`` (scaled to a frame ``w`` px wide) where that ratio exceeds ``SHADE_WIDER``,
@@ -266,8 +272,7 @@ def _shade_for_width(params: DetectionParams, c: Centres, w: int) -> DetectionPa
     fixed reach to the bit)."""
     if params.shade_px <= 0 or len(c) == 0:
         return None
-    nominal = SHADE_WIDTH_PX * max(w / 3072.0, 0.5)
-    ratio = c.median_width / nominal
+    ratio = stripe_width_ratio(c, w)
     if ratio <= SHADE_WIDER:
         return None
     return replace(params, shade_px=int(round(params.shade_px * ratio ** 2)))

@@ -15,12 +15,12 @@ import numpy as np
 from .body import BodyParams, beside, isolate_with_margin, measure
 from .calibration import Calibration
 from .detection import (
-    SHADE_WIDTH_PX,
     DetectionParams,
     check_image,
     detect_centres,
     detect_centres_and_faint,
     reliable,
+    stripe_width_ratio,
 )
 from .ends import FLOOR_STOP_MM, MERGE_ROWS, end_points, faint_ends
 from .errors import ImageError, ScanError
@@ -203,8 +203,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
                            else frame_edges(uv[animal], image.shape[:2]))
     # the stripes' median width at half height, against the width the detector's windows were set for
     meas["stripe_width_px"] = round(centres.median_width, 1) if len(centres) else None
-    reference = SHADE_WIDTH_PX * max(image.shape[1] / 3072.0, 0.5)
-    meas["warnings"] = _warnings(meas, labels, centres.median_width / reference if len(centres) else None)
+    meas["warnings"] = _warnings(meas, labels, stripe_width_ratio(centres, image.shape[1]) if len(centres) else None)
     return ScanResult(animal_pts, animal_stripe, uv[animal], pts, stripe, uv, meas, timings)
 
 
@@ -251,7 +250,7 @@ FAINT_ANIMAL = 25.0  # gray levels: the animal's stripes' median contrast under 
 
 def _warnings(meas: dict, labels: Labels, stripe_ratio: float | None = None) -> list[str]:
     """What a technician should know before trusting the numbers. ``stripe_ratio`` : the frame's median stripe
-    width over the width the detector was set for (``detection.SHADE_WIDTH_PX`` at 3072 px)."""
+    width over the width the detector was set for (``detection.stripe_width_ratio``)."""
     out = []
     if meas.get("view") in ("front", "back"):
         out.append(f"{meas['view']} views are not yet reliable: seen end-on, the head, chest and legs stand at "

@@ -371,12 +371,11 @@ def test_a_short_floor_piece_is_claimed_and_a_short_animal_piece_is_not():
 
     n, planes, floor = _claim_rig()
     rng = np.random.default_rng(1)
-    segment = _floor_rays
 
     long_z, short_z = np.linspace(1100, 1300, 40), np.linspace(1290, 1300, 8)
-    rays = np.vstack([segment(k, long_z, 500 + rng.normal(0, 0.1, 40)) for k in (5, 6, 7)]
-                     + [segment(20, short_z, 500 + rng.normal(0, 0.1, 8)),  # 8 rows of floor
-                        segment(25, short_z, 500 - 5 * np.linspace(0, 1, 8) ** 2)])  # 8 rows of a curved leg
+    rays = np.vstack([_floor_rays(k, long_z, 500 + rng.normal(0, 0.1, 40)) for k in (5, 6, 7)]
+                     + [_floor_rays(20, short_z, 500 + rng.normal(0, 0.1, 8)),  # 8 rows of floor
+                        _floor_rays(25, short_z, 500 - 5 * np.linspace(0, 1, 8) ** 2)])  # 8 rows of a curved leg
     seg = np.repeat(np.arange(5), [40, 40, 40, 8, 8])
     assert claim_background(None, rays, planes, seg, {0: 5, 1: 6, 2: 7}, np.ones(len(seg), bool), floor, n) == {3: 20}
 
@@ -390,14 +389,13 @@ def test_a_wall_piece_with_a_few_stray_centres_is_claimed_if_it_is_as_flat_as_th
 
     n, planes, floor = _claim_rig()
     rng = np.random.default_rng(2)
-    segment = _floor_rays
 
     z = np.linspace(1100, 1300, 40)
     stray = np.zeros(25)
     stray[[3, 11]] = [12.0, -30.0]  # two of 25 centres off the plane: 92 % on it
-    rays = np.vstack([segment(k, z, 500 + rng.normal(0, 0.1, 40)) for k in (5, 6, 7)]
-                     + [segment(20, z[:25], 500 + rng.normal(0, 0.1, 25) + stray),
-                        segment(25, z[:25], 500 + np.where(np.arange(25) % 2, 0.25, -0.25) + stray)])  # 2.5x
+    rays = np.vstack([_floor_rays(k, z, 500 + rng.normal(0, 0.1, 40)) for k in (5, 6, 7)]
+                     + [_floor_rays(20, z[:25], 500 + rng.normal(0, 0.1, 25) + stray),
+                        _floor_rays(25, z[:25], 500 + np.where(np.arange(25) % 2, 0.25, -0.25) + stray)])  # 2.5x
     seg = np.repeat(np.arange(5), [40, 40, 40, 25, 25])
     args = (None, rays, planes, seg, {0: 5, 1: 6, 2: 7}, np.ones(len(seg), bool), floor, n)
     assert claim_background(*args) == {3: 20}

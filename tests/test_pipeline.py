@@ -617,15 +617,10 @@ def _view_and_truth(cap, view: str):
 def _column_errors(r, truth: dict) -> np.ndarray:
     """|column| (px) from each animal point of the scan ``r`` to the true crossing nearest it in its row (the
     points within 3 px of one)."""
-    order = np.lexsort((truth["uv"][:, 0], np.rint(truth["uv"][:, 1])))
-    key = np.rint(truth["uv"][order, 1]) * 1e5 + truth["uv"][order, 0]
-    q = np.rint(r.uv[:, 1]) * 1e5 + r.uv[:, 0]
-    idx = np.clip(np.searchsorted(key, q), 1, len(key) - 1)
-    cand = np.stack([idx - 1, idx], 1)
-    d = np.abs(key[cand] - q[:, None])
-    best = cand[np.arange(len(q)), d.argmin(1)]
-    du = d.min(1)
-    return du[(du < 3) & (truth["kind"][order][best] == 5)]
+    from measurement.simulate.truth import nearest_crossings
+
+    best, du = nearest_crossings(r.uv, truth)
+    return du[(du < 3) & (truth["kind"][best] == 5)]
 
 
 def test_under_stripes_twice_as_wide_the_shaded_centres_look_for_the_room_light_farther_out(tmp_path, monkeypatch):
