@@ -23,7 +23,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import measurement.matching as matching  # noqa: E402
-from bench.common import ANIMAL  # noqa: E402
+from bench.common import ANIMAL, VIEWS  # noqa: E402
 from measurement.calibration import load_calibration  # noqa: E402
 from measurement.detection import detect_centres_and_faint  # noqa: E402
 from measurement.images import read_image  # noqa: E402
@@ -84,11 +84,11 @@ def report(cap: Path, view: str, drops: int) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("captures", nargs="+", type=Path)
-    ap.add_argument("--view", choices=("side", "top"), default=None, help="one view (default: both)")
+    ap.add_argument("--view", choices=VIEWS, default=None, help="one view (default: both)")
     ap.add_argument("--drops", type=int, default=10, help="row-order drop groups to list per view")
     args = ap.parse_args()
     for cap in args.captures:
-        for view in (args.view,) if args.view else ("side", "top"):
+        for view in (args.view,) if args.view else VIEWS:
             if (cap / "scan" / f"{view}.png").exists():
                 report(cap, view, args.drops)
 
