@@ -1053,15 +1053,34 @@ def _lit_share(rays, planes, ii, k, lit) -> float:
     return float((in_sorted(cells, lit) & in_sorted(cells - 1, lit) & in_sorted(cells + 1, lit)).mean())
 
 
-TIP_NEAR = 4.0  # a tail tip's points lie within this many stripe spacings of the end stripe's (median)
+TIP_NEAR = 5.0  # a tail tip's points lie within this many stripe spacings of the end stripe's (median)
 TIP_OFF_FLOOR_MM = 5.0  # and at least this far off the floor and wall (90 % of them)
 TIP_FLOOR_ROWS = 0.25  # a tip shares at most this share of its rows with the floor's stripe of its index
 TIP_INSIDE = 2  # stripes inside each end stripe whose next one out a tip may take too
 TIP_INNER = 0.5  # a segment with an unlabelled stripe beyond more than this share of its centres is no tip
+TIP_ROUNDS = 3  # rounds of ``_tips_once``, each from the stripes the round before added
 
 
 def _tips(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray, long_seg, left, right, bg_planes,
           spacing_mm: float, zrange: tuple[float, float], by_segment: np.ndarray) -> dict[int, int]:
+    """``_tips_once`` until it finds no more (at most ``TIP_ROUNDS`` times), each round from the end stripes
+    the rounds before it added: seen from above, a tail's tip can hold two or three stripes past the
+    animal's, each a few short segments (fur breaks them up)."""
+    out: dict[int, int] = {}
+    labelled = labelled_all
+    for _ in range(TIP_ROUNDS):
+        new = {s: k for s, k in _tips_once(c, rays, planes, seg, labelled, is_bg, long_seg, left, right, bg_planes,
+                                             spacing_mm, zrange, by_segment).items() if s not in out}
+        if not new:
+            break
+        out.update(new)
+        taken = segment_mask(seg, new)
+        labelled = np.where(taken[seg], label_table(seg, new)[seg], labelled)
+    return out
+
+
+def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray, long_seg, left, right, bg_planes,
+               spacing_mm: float, zrange: tuple[float, float], by_segment: np.ndarray) -> dict[int, int]:
     """Seen from above: labels for unlabelled segments that continue the animal one stripe past its first or
     last labelled stripe (a tail's tip, a nose). ``labelled_all`` (M,) : the centres' labels so far (-1: none);
     ``is_bg`` (S,) : the segments labelled as floor or wall; ``left``, ``right`` : the centres' row neighbours;
@@ -1075,9 +1094,19 @@ def _tips(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray, lon
     the tip's shadow beside its last rows: 2 of 12 on the clean top view of seed 8, whose length was 8.7 %
     short while any shared row kept the tip out; a floor stripe read one index off shares most of its rows
     with the floor's k, which held it out before and still does). Of candidates sharing rows the
-    nearest holds them; it is not labelled when past more than ``TIP_INNER`` of its centres lies another
-    unlabelled stripe (more of the animal follows: a 1024 px top view in a bright room had its end stripe
-    on a split peak of the stripe before, and every stripe past it would have gone one high).
+    nearest holds them; it is not labelled when past more than ``TIP_INNER`` of its centres lie two more
+    unlabelled stripes (more of the animal follows: a 1024 px top view in a bright room had its end stripe
+    on a split peak of the stripe before, and every stripe past it would have gone one high). One unlabelled
+    stripe beyond may be the tip's own next stripe, which ``_tips``' next round takes from it: with one
+    stripe counted and one round, the 50-stripe fur top view of seed 10 (3072 px) kept its tip's stripes 1
+    and 2 out, length -13.1 %. Counting two, three rounds and ``TIP_NEAR`` 5 (4 before: that view's stripe-2
+    segments lay 4.2 and 4.6 spacings from stripe 3's points, whose fur hides half of its rows) on the 148
+    cached views of 2026-12-03 (`bench/cache.py`): lengths within 1 % 57 -> 59 of the 126 placed, four
+    lengths nearer the truth (that view -0.75 %, the shared shiba's 1536 px top view -9.2 -> -0.5 %, a
+    rolled projector's 1536 px clean top view -6.8 -> +1.7 %, 3x sensor noise -37.9 -> -36.3 %), none
+    farther; animal centres 167 more right and 22 more wrong (7 of them a segment of that noisy view one
+    stripe high); the tip's points are poorer than the body's (within 2 mm down by up to 0.4 points on four
+    views, none of the five seeds' 40 views crossing 99.5 %).
 
     The clean top views of four of the five seeds measured their length 7.7-9.1 % short: the tail tip's
     stripe, one or two segments of 9-16 rows beside the floor's stripes, is too small to seed a piece or be
@@ -1154,8 +1183,13 @@ def _tips(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray, lon
         on_floor = np.zeros(height, bool)
         on_floor[c.v[(labelled_all == k) & (animal < 0)]] = True
         # past a tip there is floor or nothing: an unlabelled stripe beyond it means more of the animal
-        out_nb = (left if k < end else right)[free]
+        outer = left if k < end else right
+        out_nb = outer[free]
         more = (out_nb >= 0) & (labelled_all[np.maximum(out_nb, 0)] < 0) & long_seg[np.maximum(out_nb, 0)]
+        # (one unlabelled stripe beyond may be the tip's own next stripe, which a later round takes: only a
+        # second one beyond that means more of the animal)
+        nb2 = outer[np.maximum(out_nb, 0)]
+        more &= (nb2 >= 0) & (labelled_all[np.maximum(nb2, 0)] < 0) & long_seg[np.maximum(nb2, 0)]
         found = []
         for a, b in zip(starts, np.r_[starts[1:], len(free)], strict=True):
             if (inside[a:b].mean() < 0.9 or off[a:b].mean() < 0.9 or wrong_side[a:b].any() or taken[rows_f[a:b]].any()
