@@ -505,6 +505,25 @@ def test_a_top_view_s_body_width_reads_the_stripes_faint_ends_at_the_flank(tmp_p
     assert ended.measurements["body_length_mm"] == plain.measurements["body_length_mm"]
 
 
+def test_from_the_side_a_drooping_tails_last_stripes_are_in_the_cloud(tmp_path):
+    """From the side a drooping tail's last stripes each end below the stripe before, so no row neighbour
+    reaches them; read as the tail's tip past the animal's end stripe (``matching._tips``, once read from
+    above only), this 1536 px clean render's tail keeps its stripes 38 and 39 (they were out, and the body
+    length 1.7 % long: the length's pair is the tail's last stripe and the chest's)."""
+    from measurement.simulate.capture import write_capture
+
+    cap = write_capture(tmp_path / "side", stripes=40, size=(1536, 1024), seed=12, fur=False, scenes=("side",),
+                        poses=0)
+    cal, img, t, ref = _view_and_truth(cap, "side")
+    r = scan(img, cal, "side")
+    tk, kind = match_crossings(r.uv, t)
+    for k in (38, 39):
+        crossed = tk[r.stripe == k]  # the true stripe of each point's crossing (-1: none within 1.5 px)
+        assert (crossed >= 0).sum() >= 20 and np.all(crossed[crossed >= 0] == k)
+    assert r.measurements["body_length"]["stripes"][1] == 39
+    assert abs(r.measurements["body_length_mm"] / ref["body_length_mm"] - 1) < 0.005
+
+
 def test_seen_from_above_a_stripe_end_is_followed_over_the_floor_stripe_it_merges_with(tmp_path, monkeypatch):
     """Seen from above, where a stripe ends at the flank it runs into the floor's stripe four or five over
     (the depth alias) and labelling gave the merged rows to the floor's segment; the walk past the

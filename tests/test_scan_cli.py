@@ -94,11 +94,15 @@ def test_a_gamma_encoded_image_scans_as_the_linear_one_with_the_camera_s_gamma(s
     lin, raw = (json.loads((tmp_path / out / "measurements.json").read_text()) for out in ("lin", "raw"))
     stripes = read_ply((tmp_path / "lin" / "cloud.ply").read_bytes())["stripe"]
     assert abs(lin["point_count"] - ref.measurements["point_count"]) <= 0.01 * ref.measurements["point_count"]
-    assert abs(lin["body_height_mm"] / ref.measurements["body_height_mm"] - 1) < 0.005
-    assert abs(lin["body_length_mm"] / ref.measurements["body_length_mm"] - 1) < 0.005
+    tol = 0.005
+    assert abs(lin["body_height_mm"] / ref.measurements["body_height_mm"] - 1) < tol
+    assert abs(lin["body_length_mm"] / ref.measurements["body_length_mm"] - 1) < tol
     assert np.array_equal(np.unique(stripes), np.unique(ref.stripe))
+    # unlinearised, the same frame misses the linear one's measurements by more than twice what the
+    # linearised scan is held to (since tail tips are read from the side, 2026-12-03, the raw frame's tail
+    # is in its cloud too: height 1.2 % and length 1.0 % off, the points 2.8 %; before, the length 7.2 %)
     off = [abs(raw[k] / ref.measurements[k] - 1) for k in ("body_height_mm", "body_length_mm")]
-    assert max(off) > 0.02 or abs(raw["point_count"] / ref.measurements["point_count"] - 1) > 0.05
+    assert max(off) > 2 * tol and abs(raw["point_count"] / ref.measurements["point_count"] - 1) > 2 * tol
     r = bodyscan("scan", cal, tmp_path / "side.png", "--gamma", "0", "-o", tmp_path / "bad")
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "--gamma: camera_gamma must be a number from 0.2 to 5.0" in r.stderr and "got 0.0" in r.stderr
