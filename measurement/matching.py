@@ -1069,6 +1069,8 @@ def _tips(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray, lon
     out: dict[int, int] = {}
     labelled = labelled_all
     for _ in range(TIP_ROUNDS):
+        # (every end stripe each round: a segment held out as inner before may be a tip once the stripe beyond
+        # it is taken; reading only past the stripes just added lost the shared shiba's tail from above)
         new = {s: k for s, k in _tips_once(c, rays, planes, seg, labelled, is_bg, long_seg, left, right, bg_planes,
                                              spacing_mm, zrange, by_segment).items() if s not in out}
         if not new:
@@ -1157,7 +1159,14 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
     if not (animal >= 0).any():
         return {}
     free_all = long_seg & (labelled_all < 0)
-    first, last = int(animal[animal >= 0].min()), int(animal[animal >= 0].max())
+    # the animal's labelled centres, the background's and the free ones (by segment, then row), gathered once:
+    # each end stripe below reads a few of them
+    at = np.flatnonzero(animal >= 0)
+    at_lab = animal[at]
+    bg_at = np.flatnonzero((labelled_all >= 0) & (animal < 0))
+    bg_lab = labelled_all[bg_at]
+    free_sorted = by_segment[free_all[by_segment]]
+    first, last = int(at_lab.min()), int(at_lab.max())
     reach = 4.0 * (float(c.u.max()) - float(c.u.min())) / n  # a few stripe periods, pixels
     height = int(c.v.max()) + 1
     out: dict[int, int] = {}
@@ -1166,25 +1175,23 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
     ends = [(first + d, first + d - 1) for d in range(TIP_INSIDE, -1, -1)]
     ends += [(last - d, last - d + 1) for d in range(TIP_INSIDE, -1, -1)]
     for end, k in ends:
-        mine = np.flatnonzero(animal == end)
+        mine = at[at_lab == end]
         if not 0 <= k < n or len(mine) == 0:
             continue
         # only segments within a few stripe periods of the end stripe's columns can be its neighbours (whole)
-        near = free_all & (c.u >= float(c.u[mine].min()) - reach) & (c.u <= float(c.u[mine].max()) + reach)
+        fu = c.u[free_sorted]
+        near = (fu >= float(c.u[mine].min()) - reach) & (fu <= float(c.u[mine].max()) + reach)
         touched = np.zeros(seg.max() + 1, bool)
-        touched[seg[near]] = True
-        free = by_segment[(free_all & touched[seg])[by_segment]]  # grouped by segment
+        touched[seg[free_sorted[near]]] = True
+        free = free_sorted[touched[seg[free_sorted]]]  # grouped by segment
         if len(free) == 0:
             continue
         starts = np.r_[0, np.flatnonzero(np.diff(seg[free])) + 1]
         rays_f = rays.take(free, axis=0)
         rows_f = c.v[free].astype(np.int64)
-        ref = intersect(rays.take(mine, axis=0), np.broadcast_to(planes[end], (len(mine), 4)))
         p = intersect(rays_f, np.broadcast_to(planes[k], (len(free), 4)))
         finite = np.isfinite(p).all(axis=1)
         p = np.where(finite[:, None], p, 0.0)
-        tree = cKDTree(ref)
-        dist, _ = tree.query(p)
         off = np.abs(p @ bg_planes[:, :3].T - bg_planes[:, 3]).min(axis=1) > TIP_OFF_FLOOR_MM
         inside = depth_in_range(rays_f, planes, np.full(len(free), k), *zrange) & finite
         # beyond the end stripe in its rows (left of it below the first index, right of it past the last)
@@ -1193,11 +1200,11 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
         beside = end_u[rows_f]
         wrong_side = np.where(np.isnan(beside), False, (c.u[free] > beside) if k < end else (c.u[free] < beside))
         taken = np.zeros(height, bool)
-        taken[c.v[animal == k]] = True
+        taken[c.v[at[at_lab == k]]] = True
         # the floor's stripe k may share a few rows with a raised tip (where it leaves the tip's shadow), but
         # a floor stripe read one index off shares most of its rows with the floor's k
         on_floor = np.zeros(height, bool)
-        on_floor[c.v[(labelled_all == k) & (animal < 0)]] = True
+        on_floor[c.v[bg_at[bg_lab == k]]] = True
         # past a tip there is floor or nothing: an unlabelled stripe beyond it means more of the animal
         outer = left if k < end else right
         out_nb = outer[free]
@@ -1206,23 +1213,42 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
         # second one beyond that means more of the animal)
         nb2 = outer[np.maximum(out_nb, 0)]
         more &= (nb2 >= 0) & (labelled_all[np.maximum(nb2, 0)] < 0) & long_seg[np.maximum(nb2, 0)]
+        # the tests of each segment at once (side views hold hundreds of segments near their end stripes)
+        count = np.diff(np.r_[starts, len(free)])
+        share = _shares(np.column_stack([inside, off, wrong_side, taken[rows_f], on_floor[rows_f], more]), starts,
+                        count)
+        ok = ((share[:, 0] >= 0.9) & (share[:, 1] >= 0.9) & (share[:, 2] == 0) & (share[:, 3] == 0)
+              & (share[:, 4] <= TIP_FLOOR_ROWS))
+        inner = share[:, 5] > TIP_INNER
+        if not ok.any():
+            continue
+        # the distance to the end stripe's points, of the segments that passed the rest only
+        sel = np.flatnonzero(ok)
+        at_ok = spans(starts[sel], count[sel])
+        ref = intersect(rays.take(mine, axis=0), np.broadcast_to(planes[end], (len(mine), 4)))
+        dist = np.full(len(free), np.inf)
+        dist[at_ok] = cKDTree(ref).query(p[at_ok])[0]
         found = []
-        for a, b in zip(starts, np.r_[starts[1:], len(free)], strict=True):
-            if (inside[a:b].mean() < 0.9 or off[a:b].mean() < 0.9 or wrong_side[a:b].any() or taken[rows_f[a:b]].any()
-                    or on_floor[rows_f[a:b]].mean() > TIP_FLOOR_ROWS
-                    or np.median(dist[a:b]) > TIP_NEAR * spacing_mm):
-                continue
-            found.append((float(np.median(dist[a:b])), a, b, more[a:b].mean() > TIP_INNER))
+        for i in sel:
+            a, b = int(starts[i]), int(starts[i] + count[i])
+            near_mm = float(np.median(dist[a:b]))
+            if near_mm <= TIP_NEAR * spacing_mm:
+                found.append((near_mm, a, b, bool(inner[i])))
         claimed = np.zeros(height, bool)
-        for _, a, b, inner in sorted(found):  # nearest first: one segment per row takes k
+        for _, a, b, is_inner in sorted(found):  # nearest first: one segment per row takes k
             if claimed[rows_f[a:b]].any():
                 continue
             claimed[rows_f[a:b]] = True
             # (one with more of the animal beyond it holds its rows, but is no tip; a segment an inner stripe
             # took keeps that label)
-            if not inner and int(seg[free[a]]) not in out:
+            if not is_inner and int(seg[free[a]]) not in out:
                 out[int(seg[free[a]])] = k
     return out
+
+
+def _shares(flags: np.ndarray, starts: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """(G, F) the share of true flags (N, F) in each of G groups of consecutive rows (``starts``, ``count``)."""
+    return np.add.reduceat(flags.astype(np.int64), starts, axis=0) / count[:, None]
 
 
 def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, known, lit, table: BinTable,
