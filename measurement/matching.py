@@ -1166,6 +1166,7 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
     bg_at = np.flatnonzero((labelled_all >= 0) & (animal < 0))
     bg_lab = labelled_all[bg_at]
     free_sorted = by_segment[free_all[by_segment]]
+    free_u, free_seg = c.u[free_sorted], seg[free_sorted]
     first, last = int(at_lab.min()), int(at_lab.max())
     reach = 4.0 * (float(c.u.max()) - float(c.u.min())) / n  # a few stripe periods, pixels
     height = int(c.v.max()) + 1
@@ -1179,11 +1180,10 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
         if not 0 <= k < n or len(mine) == 0:
             continue
         # only segments within a few stripe periods of the end stripe's columns can be its neighbours (whole)
-        fu = c.u[free_sorted]
-        near = (fu >= float(c.u[mine].min()) - reach) & (fu <= float(c.u[mine].max()) + reach)
+        near = (free_u >= float(c.u[mine].min()) - reach) & (free_u <= float(c.u[mine].max()) + reach)
         touched = np.zeros(seg.max() + 1, bool)
-        touched[seg[free_sorted[near]]] = True
-        free = free_sorted[touched[seg[free_sorted]]]  # grouped by segment
+        touched[free_seg[near]] = True
+        free = free_sorted[touched[free_seg]]  # grouped by segment
         if len(free) == 0:
             continue
         starts = np.r_[0, np.flatnonzero(np.diff(seg[free])) + 1]
