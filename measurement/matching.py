@@ -1201,10 +1201,6 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
         wrong_side = np.where(np.isnan(beside), False, (c.u[free] > beside) if k < end else (c.u[free] < beside))
         taken = np.zeros(height, bool)
         taken[c.v[at[at_lab == k]]] = True
-        # the floor's stripe k may share a few rows with a raised tip (where it leaves the tip's shadow), but
-        # a floor stripe read one index off shares most of its rows with the floor's k
-        on_floor = np.zeros(height, bool)
-        on_floor[c.v[bg_at[bg_lab == k]]] = True
         # past a tip there is floor or nothing: an unlabelled stripe beyond it means more of the animal
         outer = left if k < end else right
         out_nb = outer[free]
@@ -1215,11 +1211,16 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
         more &= (nb2 >= 0) & (labelled_all[np.maximum(nb2, 0)] < 0) & long_seg[np.maximum(nb2, 0)]
         # the tests of each segment at once (side views hold hundreds of segments near their end stripes)
         count = np.diff(np.r_[starts, len(free)])
-        share = _shares(np.column_stack([inside, off, wrong_side, taken[rows_f], on_floor[rows_f], more]), starts,
-                        count)
-        ok = ((share[:, 0] >= 0.9) & (share[:, 1] >= 0.9) & (share[:, 2] == 0) & (share[:, 3] == 0)
-              & (share[:, 4] <= TIP_FLOOR_ROWS))
-        inner = share[:, 5] > TIP_INNER
+        share = _shares(np.column_stack([inside, off, wrong_side, taken[rows_f], more]), starts, count)
+        ok = (share[:, 0] >= 0.9) & (share[:, 1] >= 0.9) & (share[:, 2] == 0) & (share[:, 3] == 0)
+        inner = share[:, 4] > TIP_INNER
+        if not ok.any():
+            continue
+        # the floor's stripe k may share a few rows with a raised tip (where it leaves the tip's shadow), but
+        # a floor stripe read one index off shares most of its rows with the floor's k
+        on_floor = np.zeros(height, bool)
+        on_floor[c.v[bg_at[bg_lab == k]]] = True
+        ok &= _shares(on_floor[rows_f][:, None], starts, count)[:, 0] <= TIP_FLOOR_ROWS
         if not ok.any():
             continue
         # the distance to the end stripe's points, of the segments that passed the rest only
@@ -1228,8 +1229,10 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
         ref = intersect(rays.take(mine, axis=0), np.broadcast_to(planes[end], (len(mine), 4)))
         dist = np.full(len(free), np.inf)
         dist[at_ok] = cKDTree(ref).query(p[at_ok])[0]
+        # (a median under the limit needs half the points under it: the others are not weighed)
+        half = _shares((dist <= TIP_NEAR * spacing_mm)[:, None], starts, count)[:, 0] >= 0.5
         found = []
-        for i in sel:
+        for i in sel[half[sel]]:
             a, b = int(starts[i]), int(starts[i] + count[i])
             near_mm = float(np.median(dist[a:b]))
             if near_mm <= TIP_NEAR * spacing_mm:
