@@ -1210,8 +1210,10 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
         nb2 = outer[np.maximum(out_nb, 0)]
         more &= (nb2 >= 0) & (labelled_all[np.maximum(nb2, 0)] < 0) & long_seg[np.maximum(nb2, 0)]
         # the tests of each segment at once (side views hold hundreds of segments near their end stripes)
-        count = np.diff(np.r_[starts, len(free)])
-        share = _shares(np.column_stack([inside, off, wrong_side, taken[rows_f], more]), starts, count)
+        bounds = np.r_[starts, len(free)]
+        count = np.diff(bounds)
+        share = _kernels.group_counts(np.column_stack([inside, off, wrong_side, taken[rows_f], more]),
+                                      bounds) / count[:, None]
         ok = (share[:, 0] >= 0.9) & (share[:, 1] >= 0.9) & (share[:, 2] == 0) & (share[:, 3] == 0)
         inner = share[:, 4] > TIP_INNER
         if not ok.any():
@@ -1220,7 +1222,7 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
         # a floor stripe read one index off shares most of its rows with the floor's k
         on_floor = np.zeros(height, bool)
         on_floor[c.v[bg_at[bg_lab == k]]] = True
-        ok &= _shares(on_floor[rows_f][:, None], starts, count)[:, 0] <= TIP_FLOOR_ROWS
+        ok &= _kernels.group_counts(on_floor[rows_f][:, None], bounds)[:, 0] / count <= TIP_FLOOR_ROWS
         if not ok.any():
             continue
         # the distance to the end stripe's points, of the segments that passed the rest only
@@ -1230,7 +1232,7 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
         dist = np.full(len(free), np.inf)
         dist[at_ok] = cKDTree(ref).query(p[at_ok])[0]
         # (a median under the limit needs half the points under it: the others are not weighed)
-        half = _shares((dist <= TIP_NEAR * spacing_mm)[:, None], starts, count)[:, 0] >= 0.5
+        half = _kernels.group_counts((dist <= TIP_NEAR * spacing_mm)[:, None], bounds)[:, 0] / count >= 0.5
         found = []
         for i in sel[half[sel]]:
             a, b = int(starts[i]), int(starts[i] + count[i])
@@ -1247,11 +1249,6 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
             if not is_inner and int(seg[free[a]]) not in out:
                 out[int(seg[free[a]])] = k
     return out
-
-
-def _shares(flags: np.ndarray, starts: np.ndarray, count: np.ndarray) -> np.ndarray:
-    """(G, F) the share of true flags (N, F) in each of G groups of consecutive rows (``starts``, ``count``)."""
-    return np.add.reduceat(flags.astype(np.int64), starts, axis=0) / count[:, None]
 
 
 def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, known, lit, table: BinTable,
