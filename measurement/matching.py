@@ -227,6 +227,10 @@ class Labels:
     faint_shadow : the animal's first piece was placed from a shallow conflict ramp (its shadow's lit edge
                  mostly hidden): right on 3 of 4 such renders, but weaker evidence than usual
     segment_order : (M,) the centres by segment, then row (``segments.segment_rows(segment, v)``), or None
+    tips       : the segments labelled as a tail's tip past the animal's end stripes (``_tips``), or None
+    merged     : of those, the segments growth had given the floor's or wall's stripe whose image they run
+                 on into (``_unflat_background``): their centres are that stripe's and the tip's merged, off
+                 by 1-3 mm, and stay out of the cloud (the length reads them), or None
     """
 
     stripe: np.ndarray
@@ -237,6 +241,7 @@ class Labels:
     faint_shadow: bool = False
     segment_order: np.ndarray | None = None
     tips: np.ndarray | None = None
+    merged: np.ndarray | None = None
 
 
 def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], planes: np.ndarray,
@@ -348,10 +353,12 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
         seg_label.update({s: k for s, k in moved.items() if fg[s] != k})
     labels = _labels_of(seg, seg_label, long_seg)
     tips: dict[int, int] = {}
+    merged: set[int] = set()
     if view in ("top", "side") and bg_planes is not None and fg_labels:  # a tail tip beyond the end stripes
+        tips, merged = _tips_and_merged(c, rays, planes, seg, labels, bg_labels, long_seg, left, right, bg_planes,
+                                        spacing_mm, params.depth_range_mm, by_segment)
+        bg_labels = {s: k for s, k in bg_labels.items() if s not in merged}
         is_bg = segment_mask(seg, bg_labels)
-        tips = _tips(c, rays, planes, seg, labels, is_bg, long_seg, left, right, bg_planes, spacing_mm,
-                     params.depth_range_mm, by_segment)
         if tips:
             # the tip's stripe broken along its length goes on from it (as ``_continue_along`` above)
             tips.update(_continue_along(c, rays, planes, seg, {**seg_label, **tips}, fg_mask, set(tips), link,
@@ -371,7 +378,60 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
         labels = _off_plane_background(rays, planes, seg, c.v, labels, bg_labels, bg_planes, by_segment)
         labels = _touching_background(c, seg, labels, bg_labels, shape[1], by_segment)
     return Labels(labels, bg_planes, seg, int(weighed.sum()), int((weighed & (labels < 0)).sum()), shallow,
-                  by_segment, np.fromiter(tips, np.int64, len(tips)) if tips else None)
+                  by_segment, np.fromiter(tips, np.int64, len(tips)) if tips else None,
+                  np.fromiter(merged, np.int64, len(merged)) if merged else None)
+
+
+def _tips_and_merged(c, rays, planes, seg, labels: np.ndarray, bg_labels: dict[int, int], long_seg, left, right,
+                     bg_planes, spacing_mm: float, zrange: tuple[float, float], by_segment: np.ndarray
+                     ) -> tuple[dict[int, int], set[int]]:
+    """``_tips`` (segment -> label), with the short background segments off their plane
+    (``_unflat_background``) weighed as unlabelled too, and the set of those it took (``Labels.merged``).
+
+    Seen from above, a tail's tip stripe can run on in the image into the floor's stripe two over (the
+    depth alias: the tip 120 mm over the floor), and growth gave the whole segment the floor's label: the
+    50-stripe clean top view of seed 9 at 3072 px had its tip's stripe 1 labelled as the floor's 3, 1.1-13 mm
+    off the floor (the floor's own points 0.16 mm), length -7.6 %."""
+    is_bg = segment_mask(seg, bg_labels)
+    unflat = _unflat_background(rays, planes, seg, bg_labels, bg_planes, by_segment)
+    if not unflat:
+        return _tips(c, rays, planes, seg, labels, is_bg, long_seg, left, right, bg_planes, spacing_mm, zrange,
+                     by_segment), set()
+    loose = segment_mask(seg, dict.fromkeys(unflat, 0))
+    tips = _tips(c, rays, planes, seg, np.where(loose[seg], -1, labels), is_bg & ~loose, long_seg, left, right,
+                 bg_planes, spacing_mm, zrange, by_segment)
+    return tips, set(tips) & unflat
+
+
+UNFLAT_K = 6.0  # a short background segment whose median distance off its plane is this many times the plane's noise
+UNFLAT_MAX = 40  # centres of a background segment, at most, for it to be weighed as a tail tip
+
+
+def _unflat_background(rays, planes, seg, bg_labels: dict[int, int], bg_planes, by_segment: np.ndarray) -> set[int]:
+    """The background segments (``bg_labels``) of at most ``UNFLAT_MAX`` centres whose points lie a median of
+    more than ``UNFLAT_K`` times their plane's noise off the floor or wall: seen from above, a tail's tip
+    stripe two stripes short of the floor's (the depth alias) runs on into the floor's stripe of that
+    index, and growth gives it that label though it lies 1-5 mm off the floor (the floor's own points:
+    0.16 mm)."""
+    if not bg_labels:
+        return set()
+    size = np.bincount(seg)
+    small = {s: k for s, k in bg_labels.items() if size[s] <= UNFLAT_MAX}
+    if not small:
+        return set()
+    noise = background_flatness(rays, planes, seg, bg_labels, bg_planes, most=4000)
+    table = label_table(seg, small)
+    idx = by_segment[table[seg[by_segment]] >= 0]  # by segment, then row
+    d = np.abs(intersect(rays.take(idx, axis=0), planes.take(table[seg[idx]], axis=0)) @ bg_planes[:, :3].T
+               - bg_planes[:, 3])
+    near = d.argmin(axis=1)
+    ratio = np.take_along_axis(d, near[:, None], axis=1)[:, 0] / noise[near]
+    st = runs(seg[idx])
+    out = set()
+    for a, b in zip(st[:-1], st[1:], strict=True):
+        if float(np.median(ratio[a:b])) > UNFLAT_K:
+            out.add(int(seg[idx[a]]))
+    return out
 
 
 def _off_plane_background(rays, planes, seg, rows, labels, bg_labels: dict[int, int], bg_planes,

@@ -149,6 +149,9 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     # one-sided peaks and stripes widened at a grazing outline helped link and label their stripe, but
     # their position is off by 1.5-5 px: they stay out of the cloud
     ok &= reliable(centres, params.detection)
+    merged = np.isin(seg_ids, labels.merged) & labelled if labels.merged is not None else None
+    if merged is not None:  # a tail tip's stripe merged with a floor stripe: for the length only
+        ok &= ~merged
     if ok.sum() < 50:
         n_found = int(np.bincount(np.bincount(centres.v)).argmax()) if len(centres) else 0
         hint = ("is this calibration for this rig and stripe count, and do all its stripes fall inside the "
@@ -184,9 +187,12 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
             ep, keep = end_points(eu, ev, ek, ew, table, calibration.planes, labels.background,
                                   max(margin, FLOOR_STOP_MM), max(1, round(MERGE_ROWS * image.shape[0] / 2048)))
             ends = (ep[keep], ek[keep], ew[keep])
-    meas = measure(animal_pts, animal_stripe, rows[animal], view, params.body, ends,
-                   _wide_peaks(centres, labelled & ~ok, labels, animal_stripe, animal_pts, smooth_u, cells, table,
-                               calibration.planes, margin, params.body))
+    wide = _wide_peaks(centres, labelled & ~ok & (~merged if merged is not None else True), labels, animal_stripe,
+                       animal_pts, smooth_u, cells, table, calibration.planes, margin, params.body)
+    if merged is not None and len(animal_pts):
+        wide = _with_merged(wide, np.flatnonzero(merged), centres, labels, smooth_u, cells, table, calibration.planes,
+                            margin)
+    meas = measure(animal_pts, animal_stripe, rows[animal], view, params.body, ends, wide)
     t["measure"] = time.perf_counter()
     stages = ["start", "detect", "denoise", "match", "triangulate", "measure"]
     timings = {s: round(1000 * (t[s] - t[p]), 2) for p, s in zip(stages, stages[1:], strict=False)}
@@ -224,6 +230,22 @@ def _wide_peaks(centres, unreliable: np.ndarray, labels: Labels, animal_stripe: 
     xp = cloud_points(smooth_u, centres.u, centres.v, xi, labels.stripe, cells, table, planes)
     on = beside(animal_pts, xp, labels.background, margin, body.cluster_mm)
     return xp[on], labels.stripe[xi][on], centres.v[xi][on].astype(np.int64)
+
+
+def _with_merged(wide: tuple[np.ndarray, np.ndarray, np.ndarray] | None, xi: np.ndarray, centres, labels: Labels,
+                 smooth_u: np.ndarray, cells, table, planes: np.ndarray, margin: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """``wide`` (``_wide_peaks``) with the points, stripes and rows of the centres ``xi`` (X,) of a tail tip's
+    stripe merged with a floor stripe (``Labels.merged``) that lie more than ``margin`` mm off the floor and
+    wall (as a tip's points join the cloud)."""
+    xp = cloud_points(smooth_u, centres.u, centres.v, xi, labels.stripe, cells, table, planes)
+    off = np.isfinite(xp).all(axis=1)
+    if labels.background is not None:
+        off &= np.abs(np.nan_to_num(xp) @ labels.background[:, :3].T - labels.background[:, 3]).min(axis=1) > margin
+    extra = (xp[off], labels.stripe[xi][off], centres.v[xi][off].astype(np.int64))
+    if wide is None:
+        return extra if len(extra[1]) else None
+    return tuple(np.concatenate([a, b]) for a, b in zip(wide, extra, strict=True))  # type: ignore[return-value]
 
 
 FRAME_MARGIN = 0.01  # share of the image's width (height) within which an animal point is at its edge

@@ -745,6 +745,35 @@ def test_a_tail_tip_two_stripes_long_takes_both():
     assert _tips(*args) == {tip: 4, 45: 3}
 
 
+def test_a_tail_tip_growth_gave_a_floor_stripes_label_is_taken_back_as_the_tip():
+    """Seen from above, a tail tip's stripe can run on in the image into the floor's stripe two over (the
+    depth alias), and growth gives it the floor's label though on that plane it lies far off the floor: the
+    50-stripe clean top view of seed 9 at 3072 px had its tip's stripe 1 labelled as the floor's 3, length
+    -7.6 % (+1.2 % with it). Such a short, unflat background segment is weighed as a tip, and returned as
+    merged (its centres stay out of the cloud); a short floor segment that lies on the floor is not."""
+    from measurement.matching import _tips_and_merged, _unflat_background
+    from measurement.segments import segment_rows
+
+    args, tip = _tip_scene(floor_rows=3)
+    c, rays, planes, seg, lab, is_bg, long_seg, left, right, bg_planes, spacing_mm, zrange, _ = args
+    # the tip taken for the floor's stripe 6 (hidden under the animal), and the floor's stripe 10 cut in two:
+    # its last 21 rows a short segment (44) of its own, on the floor
+    seg = np.where((seg == 14) & (c.v >= 180), 44, seg)
+    lab = np.where(seg == tip, 6, lab)
+    by_segment = segment_rows(seg, c.v)
+    bg = {int(s): int(lab[seg == s][0]) for s in np.unique(seg) if s == 44 or is_bg[s]}
+    bg[tip] = 6
+    assert _unflat_background(rays, planes, seg, bg, bg_planes, by_segment) == {tip}
+    tips, merged = _tips_and_merged(c, rays, planes, seg, lab, bg, long_seg, left, right, bg_planes, spacing_mm,
+                                    zrange, by_segment)
+    assert tips == {tip: 4} and merged == {tip}
+    # without the floor's label on it, the tip is found as before and nothing is merged
+    lab = np.where(seg == tip, -1, lab)
+    del bg[tip]
+    assert _unflat_background(rays, planes, seg, bg, bg_planes, by_segment) == set()
+    assert _tips_and_merged(c, rays, planes, seg, lab, bg, long_seg, left, right, bg_planes, spacing_mm, zrange,
+                            by_segment) == ({tip: 4}, set())
+
 @pytest.fixture(scope="module")
 def top_blocks(tmp_path_factory):
     """A 1536x1024 clean top view (40 stripes) labelled, with what ``matching._part_shifts`` reads: the
