@@ -684,3 +684,33 @@ def test_stripes_much_wider_than_the_detector_is_set_for_are_named_in_the_warnin
     warned = _warnings(meas, Labels(np.zeros(3, np.int64), None, None, 100, 0), 11.0 / 8.0)
     assert len(warned) == 1 and "the stripes are 1.4 times as wide as the scan is made for (11 px" in warned[0]
     assert _warnings(meas, Labels(np.zeros(3, np.int64), None, None, 100, 0), 1.0) == []
+
+
+def test_a_tail_tips_centres_merged_with_a_floor_stripe_feed_the_length_off_the_floor_only():
+    """``Labels.merged``: a tip's stripe merged with a floor stripe in the image is off by 1-3 mm, so its
+    centres stay out of the cloud and reach the length as wide peaks do (``pipeline._with_merged``), those
+    that lie on the floor (the merge's own rows) left out."""
+    from measurement.detection import Centres
+    from measurement.matching import Labels
+    from measurement.pipeline import _with_merged
+    from measurement.simulate.rig import default_rig
+
+    rig = default_rig((1536, 1024), 40)
+    table = ray_table(rig.intrinsics)
+    planes = rig.projector.planes_cam()
+    u = np.array([400.0, 430.0, 700.0])
+    v = np.array([500, 501, 300], np.int32)
+    c = Centres(u, v, np.full(3, 20.0, np.float32), np.full(3, 4.0, np.float32))
+    stripe = np.array([3, 3, 12])
+    on = intersect(rays_at(u, v, table), planes[stripe])
+    floor = np.array([[0.0, 0.0, 1.0, on[0, 2]]])  # the first centre's point lies on the floor
+    assert abs(on[1, 2] - on[0, 2]) > 10.0  # the second's well off it
+    labels = Labels(stripe, floor, merged=np.array([7]))
+    got = _with_merged(None, np.array([0, 1]), c, labels, u, None, table, planes, 3.0)
+    assert got is not None
+    np.testing.assert_allclose(got[0], on[1:2])
+    assert got[1].tolist() == [3] and got[2].tolist() == [501]
+    wide = (on[2:3], np.array([12]), np.array([300]))
+    got = _with_merged(wide, np.array([0, 1]), c, labels, u, None, table, planes, 3.0)
+    assert got[1].tolist() == [12, 3] and got[2].tolist() == [300, 501]
+    assert _with_merged(None, np.array([0]), c, labels, u, None, table, planes, 3.0) is None
