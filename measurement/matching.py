@@ -395,7 +395,7 @@ def _tips_and_merged(c, rays, planes, seg, labels: np.ndarray, bg_labels: dict[i
     side the second reading moved no length on the 288 cached views and cost the timed side view 1.5 ms."""
     is_bg = segment_mask(seg, bg_labels)
     tips = _tips(c, rays, planes, seg, labels, is_bg, long_seg, left, right, bg_planes, spacing_mm, zrange,
-                 by_segment)
+                 by_segment, from_above)
     if not from_above:
         return tips, set()
     unflat = _unflat_background(rays, planes, seg, bg_labels, bg_planes, by_segment)
@@ -415,7 +415,7 @@ def _tips_and_merged(c, rays, planes, seg, labels: np.ndarray, bg_labels: dict[i
     loose = segment_mask(seg, dict.fromkeys(unflat, 0))
     now[loose[seg]] = -1
     more = _tips(c, rays, planes, seg, now, is_bg & ~loose, long_seg, left, right, bg_planes, spacing_mm, zrange,
-                 by_segment)
+                 by_segment, from_above)
     merged = set(more) & unflat
     return {**tips, **more}, merged
 
@@ -1152,20 +1152,22 @@ TIP_FLOOR_ROWS = 0.25  # a tip shares at most this share of its rows with the fl
 TIP_INSIDE = 2  # stripes inside each end stripe whose next one out a tip may take too
 TIP_INNER = 0.5  # a segment with an unlabelled stripe beyond more than this share of its centres is no tip
 TIP_ROUNDS = 3  # rounds of ``_tips_once``, each from the stripes the round before added
+TIP_ROUNDS_ABOVE = 10  # from above, where a tail's stripes past a clean end stripe are taken one per round
 
 
 def _tips(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray, long_seg, left, right, bg_planes,
-          spacing_mm: float, zrange: tuple[float, float], by_segment: np.ndarray) -> dict[int, int]:
+          spacing_mm: float, zrange: tuple[float, float], by_segment: np.ndarray,
+          from_above: bool = False) -> dict[int, int]:
     """``_tips_once`` until it finds no more (at most ``TIP_ROUNDS`` times), each round from the end stripes
     the rounds before it added: seen from above, a tail's tip can hold two or three stripes past the
     animal's, each a few short segments (fur breaks them up)."""
     out: dict[int, int] = {}
     labelled = labelled_all
-    for _ in range(TIP_ROUNDS):
+    for _ in range(TIP_ROUNDS_ABOVE if from_above else TIP_ROUNDS):
         # (every end stripe each round: a segment held out as inner before may be a tip once the stripe beyond
         # it is taken; reading only past the stripes just added lost the shared shiba's tail from above)
         new = {s: k for s, k in _tips_once(c, rays, planes, seg, labelled, is_bg, long_seg, left, right, bg_planes,
-                                             spacing_mm, zrange, by_segment).items() if s not in out}
+                                             spacing_mm, zrange, by_segment, from_above).items() if s not in out}
         if not new:
             break
         out.update(new)
@@ -1175,7 +1177,8 @@ def _tips(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray, lon
 
 
 def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray, long_seg, left, right, bg_planes,
-               spacing_mm: float, zrange: tuple[float, float], by_segment: np.ndarray) -> dict[int, int]:
+               spacing_mm: float, zrange: tuple[float, float], by_segment: np.ndarray,
+               from_above: bool = False) -> dict[int, int]:
     """Seen from above or from the side: labels for unlabelled segments that continue the animal one stripe
     past its first or last labelled stripe (a tail's tip, a nose). ``labelled_all`` (M,) : the centres' labels so far (-1: none);
     ``is_bg`` (S,) : the segments labelled as floor or wall; ``left``, ``right`` : the centres' row neighbours;
@@ -1308,7 +1311,13 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
         share = _kernels.group_counts(np.column_stack([inside, off, wrong_side, taken[rows_f], more]),
                                       bounds) / count[:, None]
         ok = (share[:, 0] >= 0.9) & (share[:, 1] >= 0.9) & (share[:, 2] == 0) & (share[:, 3] == 0)
+        # from above, more of the animal beyond holds a candidate out only past an end stripe on a split peak of
+        # the stripe inside it (every stripe past it would go one high); past a clean end stripe the stripes
+        # beyond are the tail's, which the next rounds take one by one (from the side the rule stays: read
+        # past clean end stripes too, side views gained wrong labels and lost points within 2 mm)
         inner = share[:, 4] > TIP_INNER
+        if from_above and inner.any():
+            inner &= _split_end(c, mine, at[at_lab == (end + 1 if k < end else end - 1)], height)
         if not ok.any():
             continue
         # the floor's stripe k may share a few rows with a raised tip (where it leaves the tip's shadow), but
@@ -1342,6 +1351,21 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
             if not is_inner and int(seg[free[a]]) not in out:
                 out[int(seg[free[a]])] = k
     return out
+
+
+SPLIT_END = 0.5  # an end stripe closer to the stripe inside it than this share of their median distance, in some row
+
+
+def _split_end(c, mine: np.ndarray, inner: np.ndarray, height: int) -> bool:
+    """Whether the end stripe's centres ``mine`` come within ``SPLIT_END`` of their median column distance
+    to the centres ``inner`` of the stripe inside it, in a row both cross (a split peak of that stripe)."""
+    if len(inner) == 0:
+        return False
+    u_in = np.full(height, np.nan)
+    u_in[c.v[inner]] = c.u[inner]
+    d = np.abs(c.u[mine] - u_in[c.v[mine]])
+    d = d[np.isfinite(d)]
+    return bool(len(d) and (d < SPLIT_END * np.median(d)).any())
 
 
 def _place_small(rays, planes, seg, seg_label, long_seg, small, n, weighed, known, lit, table: BinTable,
