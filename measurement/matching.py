@@ -423,12 +423,12 @@ def _tips_and_merged(c, rays, planes, seg, labels: np.ndarray, bg_labels: dict[i
 def _near_ends(c, seg, animal: np.ndarray, segments: set[int], n: int) -> set[int]:
     """Of ``segments``, those with a centre within the columns ``_tips_once`` reads beside the animal's end
     stripes (the animal's labels ``animal`` (M,), -1 elsewhere; the ``TIP_INSIDE`` stripes inside each end
-    too, four stripe periods), widened by ``TIP_ROUNDS`` periods for the stripes later rounds add."""
+    too, four stripe periods), widened by ``TIP_ROUNDS_ABOVE`` periods for the stripes later rounds add."""
     at = np.flatnonzero(animal >= 0)
     if len(at) == 0 or not segments:
         return set()
     lab = animal[at]
-    reach = (4.0 + TIP_ROUNDS) * (float(c.u.max()) - float(c.u.min())) / n
+    reach = (4.0 + TIP_ROUNDS_ABOVE) * (float(c.u.max()) - float(c.u.min())) / n
     near = np.zeros(len(c), bool)
     for lo, hi in ((lab.min(), lab.min() + TIP_INSIDE), (lab.max() - TIP_INSIDE, lab.max())):
         u = c.u[at[(lab >= lo) & (lab <= hi)]]
@@ -1158,9 +1158,10 @@ TIP_ROUNDS_ABOVE = 10  # from above, where a tail's stripes past a clean end str
 def _tips(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray, long_seg, left, right, bg_planes,
           spacing_mm: float, zrange: tuple[float, float], by_segment: np.ndarray,
           from_above: bool = False) -> dict[int, int]:
-    """``_tips_once`` until it finds no more (at most ``TIP_ROUNDS`` times), each round from the end stripes
-    the rounds before it added: seen from above, a tail's tip can hold two or three stripes past the
-    animal's, each a few short segments (fur breaks them up)."""
+    """``_tips_once`` until it finds no more (at most ``TIP_ROUNDS`` times, ``TIP_ROUNDS_ABOVE`` with
+    ``from_above``), each round from the end stripes the rounds before it added: seen from above, a tail's tip
+    can hold two or three stripes past the animal's, each a few short segments (fur breaks them up), and a
+    whole tail many more."""
     out: dict[int, int] = {}
     labelled = labelled_all
     for _ in range(TIP_ROUNDS_ABOVE if from_above else TIP_ROUNDS):
