@@ -354,10 +354,15 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     labels = _labels_of(seg, seg_label, long_seg)
     tips: dict[int, int] = {}
     merged: set[int] = set()
+    # the floor's and wall's noise, read from above by the tips' unflat pieces and by the off-plane ends
+    bg_noise = (background_flatness(rays, planes, seg, bg_labels, bg_planes, most=4000)
+                if bg_planes is not None and from_above else None)
     if view in ("top", "side") and bg_planes is not None and fg_labels:  # a tail tip beyond the end stripes
         tips, merged = _tips_and_merged(c, rays, planes, seg, labels, bg_labels, long_seg, left, right, bg_planes,
-                                        spacing_mm, params.depth_range_mm, by_segment, from_above)
-        bg_labels = {s: k for s, k in bg_labels.items() if s not in merged}
+                                        spacing_mm, params.depth_range_mm, by_segment, from_above, bg_noise)
+        if merged:  # (the background without them has a noise of its own)
+            bg_labels = {s: k for s, k in bg_labels.items() if s not in merged}
+            bg_noise = None
         is_bg = segment_mask(seg, bg_labels)
         if tips:
             # the tip's stripe broken along its length goes on from it (as ``_continue_along`` above)
@@ -375,7 +380,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     else:
         labels = _enforce_row_order(c, labels, order)
     if bg_planes is not None and from_above:
-        labels = _off_plane_background(rays, planes, seg, c.v, labels, bg_labels, bg_planes, by_segment)
+        labels = _off_plane_background(rays, planes, seg, c.v, labels, bg_labels, bg_planes, by_segment, bg_noise)
         labels = _touching_background(c, seg, labels, bg_labels, shape[1], by_segment)
     return Labels(labels, bg_planes, seg, int(weighed.sum()), int((weighed & (labels < 0)).sum()), shallow,
                   by_segment, np.fromiter(tips, np.int64, len(tips)) if tips else None,
@@ -384,7 +389,7 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
 
 def _tips_and_merged(c, rays, planes, seg, labels: np.ndarray, bg_labels: dict[int, int], long_seg, left, right,
                      bg_planes, spacing_mm: float, zrange: tuple[float, float], by_segment: np.ndarray,
-                     from_above: bool = True) -> tuple[dict[int, int], set[int]]:
+                     from_above: bool = True, noise: np.ndarray | None = None) -> tuple[dict[int, int], set[int]]:
     """``_tips`` (segment -> label) and then, past what it took, the short background segments off their plane
     (``_unflat_background``) weighed as unlabelled; the set of those taken (``Labels.merged``).
 
@@ -392,13 +397,14 @@ def _tips_and_merged(c, rays, planes, seg, labels: np.ndarray, bg_labels: dict[i
     depth alias: the tip 120 mm over the floor), and growth gave the whole segment the floor's label: the
     50-stripe clean top view of seed 9 at 3072 px had its tip's stripe 1 labelled as the floor's 3, 1.1-13 mm
     off the floor (the floor's own points 0.16 mm), length -7.6 %. From above only (``from_above``): from the
-    side the second reading moved no length on the 288 cached views and cost the timed side view 1.5 ms."""
+    side the second reading moved no length on the 288 cached views and cost the timed side view 1.5 ms.
+    ``noise`` : ``background.background_flatness`` of ``bg_labels``, when known."""
     is_bg = segment_mask(seg, bg_labels)
     tips = _tips(c, rays, planes, seg, labels, is_bg, long_seg, left, right, bg_planes, spacing_mm, zrange,
                  by_segment, from_above)
     if not from_above:
         return tips, set()
-    unflat = _unflat_background(rays, planes, seg, bg_labels, bg_planes, by_segment)
+    unflat = _unflat_background(rays, planes, seg, bg_labels, bg_planes, by_segment, noise)
     if not unflat:
         return tips, set()
     # read again past what that took, the unflat segments unlabelled: weighed with the others at once, a floor
@@ -440,35 +446,39 @@ UNFLAT_K = 6.0  # a short background segment whose median distance off its plane
 UNFLAT_MAX = 40  # centres of a background segment, at most, for it to be weighed as a tail tip
 
 
-def _unflat_background(rays, planes, seg, bg_labels: dict[int, int], bg_planes, by_segment: np.ndarray) -> set[int]:
+def _unflat_background(rays, planes, seg, bg_labels: dict[int, int], bg_planes, by_segment: np.ndarray,
+                       noise: np.ndarray | None = None) -> set[int]:
     """The background segments (``bg_labels``) of at most ``UNFLAT_MAX`` centres whose points lie a median of
     more than ``UNFLAT_K`` times their plane's noise off the floor or wall: seen from above, a tail's tip
     stripe two stripes short of the floor's (the depth alias) runs on into the floor's stripe of that
     index, and growth gives it that label though it lies 1-5 mm off the floor (the floor's own points:
-    0.16 mm)."""
+    0.16 mm). ``noise`` : the planes' ``background.background_flatness``, when known."""
     if not bg_labels:
         return set()
     size = np.bincount(seg)
     small = {s: k for s, k in bg_labels.items() if size[s] <= UNFLAT_MAX}
     if not small:
         return set()
-    noise = background_flatness(rays, planes, seg, bg_labels, bg_planes, most=4000)
+    if noise is None:
+        noise = background_flatness(rays, planes, seg, bg_labels, bg_planes, most=4000)
     table = label_table(seg, small)
     idx = by_segment[table[seg[by_segment]] >= 0]  # by segment, then row
     d = np.abs(intersect(rays.take(idx, axis=0), planes.take(table[seg[idx]], axis=0)) @ bg_planes[:, :3].T
                - bg_planes[:, 3])
     near = d.argmin(axis=1)
     ratio = np.take_along_axis(d, near[:, None], axis=1)[:, 0] / noise[near]
-    st = runs(seg[idx])
-    out = set()
-    for a, b in zip(st[:-1], st[1:], strict=True):
-        if float(np.median(ratio[a:b])) > UNFLAT_K:
-            out.add(int(seg[idx[a]]))
-    return out
+    # each segment's median ratio at once: sorted within the segments (ascending ids, so the runs stay put)
+    seg_idx = seg[idx]
+    ratio = ratio[np.lexsort((ratio, seg_idx))]
+    st = runs(seg_idx)
+    count = np.diff(st)
+    median = 0.5 * (ratio[st[:-1] + (count - 1) // 2] + ratio[st[:-1] + count // 2])
+    median[np.add.reduceat(np.isnan(ratio), st[:-1]) > 0] = np.nan  # (as np.median: a NaN makes it NaN)
+    return {int(s) for s in seg_idx[st[:-1][median > UNFLAT_K]]}
 
 
 def _off_plane_background(rays, planes, seg, rows, labels, bg_labels: dict[int, int], bg_planes,
-                          order: np.ndarray | None = None) -> np.ndarray:
+                          order: np.ndarray | None = None, noise: np.ndarray | None = None) -> np.ndarray:
     """``labels`` (M,) without the end centres of background segments (``bg_labels``; their first and last
     ``OFF_PLANE_ENDS``, by ``rows`` (M,)) that lie more than ``OFF_PLANE`` times their nearest background
     plane's noise (``background.background_flatness``: the median distance of its labelled points, at least
@@ -501,7 +511,8 @@ def _off_plane_background(rays, planes, seg, rows, labels, bg_labels: dict[int, 
     count = np.diff(run)
     at = np.arange(len(idx)) - np.repeat(run[:-1], count)
     idx = idx[(at < OFF_PLANE_ENDS) | (np.repeat(count, count) - at <= OFF_PLANE_ENDS)]
-    noise = background_flatness(rays, planes, seg, bg_labels, bg_planes, most=4000)
+    if noise is None:  # (``background_flatness`` of ``bg_labels``, when the caller has it)
+        noise = background_flatness(rays, planes, seg, bg_labels, bg_planes, most=4000)
     d = np.abs(intersect(rays.take(idx, axis=0), planes.take(labels[idx], axis=0)) @ bg_planes[:, :3].T - bg_planes[:, 3])
     j = d.argmin(axis=1)
     off = d[np.arange(len(idx)), j] > OFF_PLANE * noise[j]

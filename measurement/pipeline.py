@@ -12,6 +12,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .background import near_planes
 from .body import BodyParams, beside, isolate_with_margin, measure
 from .calibration import Calibration
 from .detection import (
@@ -149,9 +150,9 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     # one-sided peaks and stripes widened at a grazing outline helped link and label their stripe, but
     # their position is off by 1.5-5 px: they stay out of the cloud
     ok &= reliable(centres, params.detection)
-    merged = np.isin(seg_ids, labels.merged) & labelled if labels.merged is not None else None
-    if merged is not None:  # a tail tip's stripe merged with a floor stripe: for the length only
-        ok &= ~merged
+    # a tail tip's stripe merged with a floor stripe (``Labels.merged``): for the length only
+    merged = np.isin(seg_ids, labels.merged) & labelled if labels.merged is not None else np.zeros(len(ok), bool)
+    ok &= ~merged
     if ok.sum() < 50:
         n_found = int(np.bincount(np.bincount(centres.v)).argmax()) if len(centres) else 0
         hint = ("is this calibration for this rig and stripe count, and do all its stripes fall inside the "
@@ -187,9 +188,9 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
             ep, keep = end_points(eu, ev, ek, ew, table, calibration.planes, labels.background,
                                   max(margin, FLOOR_STOP_MM), max(1, round(MERGE_ROWS * image.shape[0] / 2048)))
             ends = (ep[keep], ek[keep], ew[keep])
-    wide = _wide_peaks(centres, labelled & ~ok & (~merged if merged is not None else True), labels, animal_stripe,
-                       animal_pts, smooth_u, cells, table, calibration.planes, margin, params.body)
-    if merged is not None and len(animal_pts):
+    wide = _wide_peaks(centres, labelled & ~ok & ~merged, labels, animal_stripe, animal_pts, smooth_u, cells, table,
+                       calibration.planes, margin, params.body)
+    if merged.any() and len(animal_pts):
         wide = _with_merged(wide, np.flatnonzero(merged), centres, labels, smooth_u, cells, table, calibration.planes,
                             margin)
     meas = measure(animal_pts, animal_stripe, rows[animal], view, params.body, ends, wide)
@@ -241,7 +242,7 @@ def _with_merged(wide: tuple[np.ndarray, np.ndarray, np.ndarray] | None, xi: np.
     xp = cloud_points(smooth_u, centres.u, centres.v, xi, labels.stripe, cells, table, planes)
     off = np.isfinite(xp).all(axis=1)
     if labels.background is not None:
-        off &= np.abs(np.nan_to_num(xp) @ labels.background[:, :3].T - labels.background[:, 3]).min(axis=1) > margin
+        off &= ~near_planes(np.nan_to_num(xp), labels.background, margin)
     extra = (xp[off], labels.stripe[xi][off], centres.v[xi][off].astype(np.int64))
     if wide is None:
         return extra if len(extra[1]) else None
