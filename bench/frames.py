@@ -7,7 +7,9 @@ Each frame transform is applied to the stripe image of every view of ``bench/sca
 50 stripes, fur and clean, side and top) before the scan; the truth is the render's own. ``none``: the frame
 as rendered; ``dark``: every gray level halved (half the exposure or gain, noise included); ``vignette``: a
 cos^4 fall-off to 0.55 of the centre's light in the corners; ``blur``: a Gaussian of sigma 1.2 px on top of the
-simulator's optics (a softer lens or focus). Per view the bench's figures, then per transform how many views
+simulator's optics (a softer lens or focus); ``jpeg``: encoded as a JPEG of quality 85; ``bright``: every gray level
+times 2.5, clipped at 255 (overexposed: flat-topped stripes); ``specks``: 0.05 % of the pixels stuck at 255 or 0
+(hot and dead pixels); ``noisy``: Gaussian noise of 4 gray levels more. Per view the bench's figures, then per transform how many views
 have at least 95 % of the animal's labelled crossings right and how many lengths and heights lie within 1 %.
 """
 
@@ -46,7 +48,36 @@ def blur(img: np.ndarray, sigma: float = 1.2) -> np.ndarray:
     return _gray(cv2.GaussianBlur(img.astype(np.float64), (0, 0), sigma))
 
 
-FRAMES = {"none": None, "dark": dark, "vignette": vignette, "blur": blur}
+def jpeg(img: np.ndarray, quality: int = 85) -> np.ndarray:
+    """Encoded and decoded as a JPEG of this quality (a camera's or a web upload's default)."""
+    ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    if not ok:
+        raise RuntimeError("JPEG encoding failed")
+    return cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
+
+
+def bright(img: np.ndarray, gain: float = 2.5) -> np.ndarray:
+    """Every gray level times ``gain``, clipped: an overexposed frame, the stripes' crests flat at 255."""
+    return _gray(img.astype(np.float64) * gain)
+
+
+def specks(img: np.ndarray, share: float = 5e-4, seed: int = 0) -> np.ndarray:
+    """``share`` of the pixels stuck: half of them at 255 (hot), half at 0 (dead)."""
+    out = img.copy()
+    rng = np.random.default_rng(seed)
+    at = rng.choice(out.size, int(share * out.size), replace=False)
+    out.ravel()[at[: len(at) // 2]] = 255
+    out.ravel()[at[len(at) // 2:]] = 0
+    return out
+
+
+def noisy(img: np.ndarray, sigma: float = 4.0, seed: int = 0) -> np.ndarray:
+    """Gaussian read noise of ``sigma`` gray levels on top of the simulator's own."""
+    return _gray(img.astype(np.float64) + np.random.default_rng(seed).normal(0.0, sigma, img.shape))
+
+
+FRAMES = {"none": None, "dark": dark, "vignette": vignette, "blur": blur, "jpeg": jpeg, "bright": bright,
+          "specks": specks, "noisy": noisy}
 
 
 def main() -> None:
