@@ -50,6 +50,7 @@ from .offsets import (
     sharp_minimum,
     union_sorted,
 )
+from .planes import extended_planes
 from .segments import (
     denoise,
     label_table,
@@ -93,6 +94,7 @@ SIDE_ANCHOR_FLOOR, SIDE_ANCHOR_MIN = 0.02, 50
 # / 201 views placed, wrong animal centres +15 911 / -3222 / -5633.
 GROWTH_COVER = 0.5
 PIECE_ROUNDS = 80  # rounds of a piece's growth (segments that wait take more of them)
+PIECE_PAD = 1.0  # virtual stripes either side of the pattern a piece may grow over, as a share of the stripes
 _TRACE: list | None = None  # tests and benchmarks may collect the foreground clusters here
 
 
@@ -717,21 +719,25 @@ def _pieces(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, pair
     state = np.where(sizes > 0, -1, -2)
     by_nb, by_own = _kernels.pair_groups(pairs.cols, len(sizes))
     gaps = np.array((1, 2, 3), np.int64)
+    # the provisional indices run over virtual stripes either side of the pattern: held to the n real
+    # ones, a piece seeded off the middle was cut off one side, short of the animal's end
+    pad = round(PIECE_PAD * n)
+    wide, n_wide = extended_planes(planes, pad), n + 2 * pad
     found = []
     while sizes.sum() >= 50:
         seed = int(np.argmax(sizes))
         if sizes[seed] < 30:
             break
-        segs, labs = _kernels.grow_piece(rays, planes, pairs.cols, by_nb, by_own, state, seed, mid, tol, n, gaps,
-                                         GAP_PENALTY_MM, 0.6, PIECE_ROUNDS, gaps, 0.7, 3, GROWTH_COVER)
+        segs, labs = _kernels.grow_piece(rays, wide, pairs.cols, by_nb, by_own, state, seed, mid + pad, tol, n_wide,
+                                         gaps, GAP_PENALTY_MM, 0.6, PIECE_ROUNDS, gaps, 0.7, 3, GROWTH_COVER)
         state[segs] = -2
         in_cluster = state[seg.take(left_idx)] == -2
         idx = left_idx[in_cluster]
         left_idx = left_idx[~in_cluster]
         sizes -= np.bincount(seg[idx], minlength=len(sizes))
         if along is not None and len(segs) > 1 and len(idx) >= 50:  # smaller pieces are never weighed
-            labs = _along_stripe(c, rays, planes, seg, idx, segs, labs, pairs, by_own, n, *along)
-        found.append((idx, dict(zip(segs.tolist(), labs.tolist(), strict=True))))
+            labs = _along_stripe(c, rays, wide, seg, idx, segs, labs, pairs, by_own, n_wide, *along)
+        found.append((idx, dict(zip(segs.tolist(), (labs - pad).tolist(), strict=True))))
     return found
 
 

@@ -172,6 +172,29 @@ def pencil_axis(planes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return p0, a
 
 
+def extended_planes(planes: np.ndarray, pad: int, ends: int = 4) -> np.ndarray:
+    """The light planes (N, 4) with ``pad`` virtual ones before the first and after the last: (N + 2 pad, 4),
+    the real ones at pad..pad + N - 1. The virtual planes go on turning about the planes' common axis
+    (``pencil_axis``) by the mean angle between the last ``ends`` planes at each end: the stripes a wider
+    pattern would cast. Labelling grows a piece with provisional indices before it knows where the piece
+    lies in the pattern; held to the N real planes, a piece whose seed sat off the middle was cut off at
+    an index that is no edge of the animal (``matching._pieces``)."""
+    n = len(planes)
+    if pad <= 0 or n < 2:
+        return np.array(planes, np.float64)
+    p0, a = pencil_axis(planes)
+    u, w = _axis_basis(a)
+    normals = planes[:, :3]
+    theta = np.unwrap(np.arctan2(normals @ w, normals @ u))
+    k = min(ends, n - 1)
+    lo_step = (theta[k] - theta[0]) / k
+    hi_step = (theta[-1] - theta[-1 - k]) / k
+    t = np.concatenate([theta[0] - lo_step * np.arange(pad, 0, -1), theta[-1] + hi_step * np.arange(1, pad + 1)])
+    virtual_n = np.cos(t)[:, None] * u + np.sin(t)[:, None] * w
+    virtual = np.column_stack([virtual_n, virtual_n @ p0])
+    return np.concatenate([virtual[:pad], planes, virtual[pad:]])
+
+
 def _axis_basis(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ref = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     u = np.cross(a, ref)

@@ -867,3 +867,46 @@ def test_a_block_of_the_animal_read_stripes_into_its_conflicts_is_moved_back(top
     restored = sum(size[s] for s in end if back.get(s) == fg[s]) / sum(size[s] for s in end)
     assert restored > 0.8  # the rest: short segments in blocks under PART_MIN centres
     assert all(back[s] == k for s, k in fg.items() if s not in end)
+
+
+def test_a_piece_seeded_off_the_middle_grows_to_both_ends_of_the_pattern(monkeypatch):
+    """A piece is grown with provisional indices, its seed (the longest segment) at the middle one: held to
+    the pattern's own indices, a surface lit by all 40 stripes seeded at stripe 12 lost stripes 32-39 (they
+    would have needed indices 40-47) to a piece of their own, and the cut-off piece's conflict curve lost
+    its pattern-edge wall (the shared shiba's and cow's top views were placed one or two stripes off, or
+    refused). Growth runs over virtual stripes beyond the pattern, so the piece holds every stripe."""
+    import measurement.matching as m
+    from measurement.matching import _neighbour_pairs, _pieces
+
+    planes, rays, seg, left, right, lab = _steep_ramp(
+        0.0, range(40), lambda k: np.arange(-60, 60) if k == 12 else np.arange(-40, 40))
+    long_seg = np.ones(len(seg), bool)
+    pairs = _neighbour_pairs(seg, long_seg, left, right)
+    (idx, trial), = _pieces(None, rays, planes, seg, {}, long_seg, left, right, 20.0, 40, pairs, 20)
+    assert len(idx) == len(seg)
+    k = {int(lab[seg == s][0]): v for s, v in trial.items()}  # true stripe -> provisional label
+    assert sorted(k) == list(range(40))
+    assert all(k[s] - k[12] == s - 12 for s in k) and k[12] == 20
+    monkeypatch.setattr(m, "PIECE_PAD", 0.0)  # held to the pattern's indices, as before
+    pieces = _pieces(None, rays, planes, seg, {}, long_seg, left, right, 20.0, 40, pairs, 20)
+    assert [len(p[0]) for p in pieces] == [2600, 640]
+
+
+def test_virtual_planes_go_on_turning_about_the_pencils_axis():
+    from measurement.planes import extended_planes, pencil_axis
+    from measurement.simulate.rig import default_rig
+
+    planes = default_rig((1536, 1024), 40).projector.planes_cam()
+    wide = extended_planes(planes, 10)
+    assert wide.shape == (60, 4)
+    np.testing.assert_array_equal(wide[10:50], planes)
+    p0, a = pencil_axis(planes)
+    np.testing.assert_allclose(wide[:, :3] @ p0, wide[:, 3], atol=1e-9)  # every plane holds the axis
+    np.testing.assert_allclose(wide[:, :3] @ a, 0.0, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(wide[:, :3], axis=1), 1.0)
+    turn = np.degrees(np.arccos(np.clip(np.sum(wide[1:, :3] * wide[:-1, :3], axis=1), -1, 1)))
+    np.testing.assert_allclose(turn[:10], turn[10:14].mean(), rtol=1e-6)  # the first four planes' mean step
+    np.testing.assert_allclose(turn[-10:], turn[-14:-10].mean(), rtol=1e-6)
+    # the virtual planes continue the pattern's direction: the distance from the camera's axis grows on
+    x_at = wide[:, 3] / wide[:, 0]  # where each plane crosses the x axis (y = z = 0)
+    assert (np.diff(x_at) > 0).all() or (np.diff(x_at) < 0).all()

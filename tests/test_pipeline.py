@@ -580,7 +580,11 @@ def test_seen_from_above_a_tail_tip_beyond_the_last_labelled_stripe_takes_the_ne
     in. This 1536 px render with a denser fan (0.7 times the stripe spacing) measured it 3.3 % short of the
     same definition on the true stripe points. A segment one index past the animal's end stripe, beside
     that stripe's points and off the floor, takes that index (``matching._tips``): the length is within
-    1 %, and the segments so labelled are right."""
+    1 %, and the segments so labelled are right.
+
+    Since pieces grow past the pattern's edge (``matching.PIECE_PAD``) this view's tip stripe (stripe 0)
+    joins the body's piece and ``_tips`` has nothing left to take; held to the pattern (``PIECE_PAD`` 0) the
+    piece stops one stripe short of it, as every piece did before, and ``_tips`` is tested there."""
     from dataclasses import replace
 
     import measurement.matching as matching
@@ -592,8 +596,12 @@ def test_seen_from_above_a_tail_tip_beyond_the_last_labelled_stripe_takes_the_ne
     cap = write_capture(tmp_path / "top", stripes=40, size=(1536, 1024), seed=4, fur=True, scenes=("side", "top"),
                         poses=0, rig=dense)
     cal, img, t, ref = _view_and_truth(cap, "top")
-    found: dict = {}
     tips = matching._tips
+    monkeypatch.setattr(matching, "_tips", lambda *a, **k: {})
+    grown = scan(img, cal, "top")
+    assert abs(grown.measurements["body_length_mm"] / ref["body_length_mm"] - 1) < 0.01
+    monkeypatch.setattr(matching, "PIECE_PAD", 0.0)
+    found: dict = {}
     monkeypatch.setattr(matching, "_tips", lambda *a, **k: found.update(tips(*a, **k)) or dict(found))
     tipped = scan(img, cal, "top")
     monkeypatch.setattr(matching, "_tips", lambda *a, **k: {})
