@@ -25,6 +25,7 @@ from .detection import (
 )
 from .ends import FLOOR_STOP_MM, MERGE_ROWS, end_points, faint_ends
 from .errors import ImageError, ScanError
+from .images import sample_bits
 from .matching import Labels, MatchingParams, denoise, label_centres
 from .orientation import stripe_axis, swap_xy, transpose_image
 from .segments import smooth_along_stripes
@@ -206,6 +207,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     on_animal = idx[animal]
     meas["animal_contrast"] = (round(float(np.median(centres.contrast.take(on_animal))), 1)
                                if len(on_animal) >= 200 else None)
+    meas["saturated_share"] = saturated_share(image, uv[animal])
     meas["frame_edges"] = (frame_edges(uv[animal][:, ::-1], (image.shape[1], image.shape[0])) if calibration.transposed
                            else frame_edges(uv[animal], image.shape[:2]))
     # the stripes' median width at half height, against the width the detector's windows were set for
@@ -266,6 +268,22 @@ def frame_edges(uv: np.ndarray, shape: tuple[int, int], margin: float = FRAME_MA
     return [edge for edge, hit in near.items() if hit]
 
 
+SATURATED = 0.05  # share of the animal's points on saturated pixels from which a scan is warned about
+
+
+def saturated_share(image: np.ndarray, uv: np.ndarray) -> float | None:
+    """The share of the points at pixels uv (N, 2) whose pixel in the frame (H, W) holds the largest value its
+    samples can (255, or 2^bits - 1 of a 16-bit frame's ``sample_bits``): clipped stripe crests. None without
+    points. On the simulator's five seeds' 40 views at 3072 px: 0 as rendered, 10-34 % when overexposed 2.5x."""
+    if len(uv) == 0:
+        return None
+    top = 2 ** sample_bits(image) - 1
+    px = np.rint(uv).astype(np.int64)
+    h, w = image.shape[:2]
+    u, v = np.clip(px[:, 0], 0, w - 1), np.clip(px[:, 1], 0, h - 1)
+    return round(float(np.mean(image[v, u] >= top)), 4)
+
+
 FEW_ANIMAL_POINTS, FEW_ANIMAL_SHARE = 300, 0.02  # an "animal" under both is stray points, not an animal
 WIDE_STRIPES = 1.25  # a frame's median stripe width over the detector's reference above which a scan is warned about
 FAINT_ANIMAL = 25.0  # gray levels: the animal's stripes' median contrast under which a scan is warned about
@@ -293,6 +311,13 @@ def _warnings(meas: dict, labels: Labels, stripe_ratio: float | None = None) -> 
                    "measures short and, seen from above, its stripe indices may be off by a stripe or more, "
                    "which moves the whole cloud in depth: raise the exposure or the projector's brightness "
                    "and scan again")
+    saturated = meas.get("saturated_share")
+    if saturated is not None and saturated >= SATURATED:
+        out.append(f"{100 * saturated:.0f} % of the animal's points lie on saturated pixels: clipped stripes are "
+                   "flat-topped and wide, their centres less sure, and they join parts of the animal that should "
+                   "stay apart (on the simulator, frames overexposed 2.5 times placed 2 of 40 views one stripe "
+                   "off, which moves the whole cloud in depth; none as exposed): lower the exposure or the "
+                   "projector's brightness and scan again")
     if labels.pieces and labels.unplaced > 0.3 * labels.pieces:
         out.append(f"{100 * labels.unplaced / labels.pieces:.0f} % of the stripe light on the animal could not be "
                    "matched to a light plane (nothing in the image fixed which stripe it was), so those parts "
