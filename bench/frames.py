@@ -94,7 +94,7 @@ def main() -> None:
     unknown = [f for f in frames if f not in FRAMES]
     if unknown:
         ap.error(f"unknown frame transform {', '.join(unknown)} (choose from {', '.join(FRAMES)})")
-    print("frame     config       view  animal pts  labels right  within 2 mm  length err  height err")
+    print("frame     config       view  animal pts  labels right  within 2 mm  length err  height err  saturated")
     totals = {f: [0, 0, 0, 0] for f in frames}  # views, placed, lengths, heights
     for seed in (int(v) for v in args.seeds.split(",")):
         for cfg in ("40-fur", "40-clean", "50-fur", "50-clean"):
@@ -112,7 +112,7 @@ def main() -> None:
                     print(f"{name:9s} {cfg + '/' + str(seed):12s} {view:4s} {e['animal_points']:7d}/{e['animal_truth_crossings']:<6d}"
                           f" {e['animal_label_right']:8.2%}   {e['within_2mm']:9.2%}   "
                           f"{pct_err(length, e['body_length_truth_mm'])}     "
-                          f"{pct_err(height, e['body_height_truth_mm'])}", flush=True)
+                          f"{pct_err(height, e['body_height_truth_mm'])}     {e['saturated_share'] or 0:.2%}", flush=True)
     for name, (n, placed, lengths, heights) in totals.items():
         print(f"{name}: {placed} of {n} views with >= 95 % of the animal right, lengths within 1 % {lengths}, "
               f"heights {heights}")

@@ -104,6 +104,7 @@ def evaluate(cap: Path, view: str, ambient: bool = False, cal=None, gamma: float
         "body_length_mm": r.measurements["body_length_mm"], "body_length_truth_mm": ref["body_length_mm"],
         "body_height_mm": r.measurements["body_height_mm"], "body_height_truth_mm": ref["body_height_mm"],
         "torso_length_mm": info["anatomy"].get("torso_length_mm"),
+        "saturated_share": r.measurements.get("saturated_share"),
         "timings_ms": r.timings_ms,
     }
 

@@ -255,8 +255,8 @@ def test_faint_stripes_on_a_dark_coat_are_named_in_the_warnings(small_capture, t
 
 
 def test_an_overexposed_frame_is_named_in_the_warnings(small_capture, truth_cal):
-    """Clipped stripes (the frame 2.5 times over its exposure) placed two of the five seeds' 40 views one stripe
-    off: the scan counts the animal's points on saturated pixels and says so; as exposed it has a few. A 12-bit
+    """Clipped stripes (the frame 2.5 times over its exposure) left two of the five seeds' 40 views with all or
+    part of the animal one stripe off: the scan counts the animal's points on saturated pixels and says so; as exposed it has a few. A 12-bit
     frame is saturated at 4095, not at 65535."""
     img = read_image(small_capture / "scan" / "side.png")
     plain = scan(img, truth_cal, "side")
