@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 
 import measurement.matching as matching
-from measurement.calibration import load_calibration
-from measurement.detection import detect_centres
+from measurement.calibration import Calibration, load_calibration
+from measurement.detection import Centres, detect_centres
 from measurement.images import read_image
 from measurement.matching import denoise, label_centres
 from measurement.simulate.capture import write_capture
@@ -21,6 +21,49 @@ from measurement.triangulation import ray_table, rays_at
 
 ANIMAL = 5
 VIEWS = ("side", "top")
+
+
+@dataclass
+class ScanInput:
+    """What the scan labels in one cached view, made as ``pipeline.scan`` makes it: the calibration (the
+    simulator's true one), the frame's shape, the faint-peak detector's centres denoised, and their rays."""
+
+    cal: Calibration
+    shape: tuple[int, ...]
+    centres: Centres
+    rays: np.ndarray
+
+
+def scan_input(cap: Path, view: str) -> ScanInput:
+    from measurement.detection import detect_centres_and_faint
+    from measurement.pipeline import ScanParams
+    from measurement.triangulation import rays_and_cells
+
+    cal = load_calibration(cap / "truth" / "truth.json")
+    img = read_image(cap / "scan" / f"{view}.png")
+    c, _ = detect_centres_and_faint(img, ScanParams().detection, None)
+    c = c.take(denoise(c, img.shape[:2]))
+    return ScanInput(cal, img.shape[:2], c, rays_and_cells(c.u, c.v, ray_table(cal.intrinsics, cal.transposed))[0])
+
+
+def captures_main(doc: str | None, report, option: str, default: int, help_text: str) -> None:
+    """The command line of a bench that reports on cached captures: CAPTURE [CAPTURE ...] [--view V] and one
+    integer ``option``; calls ``report(capture, view, value)`` for each view a capture holds."""
+    ap = argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("captures", nargs="+", type=Path)
+    ap.add_argument("--view", choices=VIEWS, default=None, help="one view (default: both)")
+    ap.add_argument(f"--{option}", type=int, default=default, help=help_text)
+    args = ap.parse_args()
+    for cap in args.captures:
+        for view in (args.view,) if args.view else VIEWS:
+            if (cap / "scan" / f"{view}.png").exists():
+                report(cap, view, getattr(args, option))
+
+
+def counts(values: np.ndarray) -> str:
+    """``3x12 5x40``: each distinct value and how often it occurs."""
+    ks, n = np.unique(values, return_counts=True)
+    return " ".join(f"{k}x{c}" for k, c in zip(ks.tolist(), n.tolist(), strict=True))
 
 
 def size_and_cache(doc: str | None, size: str = "1536x1024") -> tuple[tuple[int, int], Path]:

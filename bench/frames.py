@@ -2,6 +2,7 @@
 might hand them over.
 
     python bench/frames.py [--seeds 4,8] [--frames dark,vignette,blur] [--size 3072x2048] [--cache /tmp/bodyscan-bench]
+                           [--save DIR]
 
 Each frame transform is applied to the stripe image of every view of ``bench/scan.py``'s configurations (40 and
 50 stripes, fur and clean, side and top) before the scan; the truth is the render's own. ``none``: the frame
@@ -25,6 +26,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.scan import capture_for, evaluate, pct_err  # noqa: E402
+from measurement.images import read_image  # noqa: E402
 
 
 def _gray(img: np.ndarray) -> np.ndarray:
@@ -80,12 +82,27 @@ FRAMES = {"none": None, "dark": dark, "vignette": vignette, "blur": blur, "jpeg"
           "specks": specks, "noisy": noisy}
 
 
+def save(cap: Path, view: str, name: str, out: Path) -> Path:
+    """Write the capture ``cap``'s ``view`` under the frame transform ``name`` as the capture
+    ``out/NAME-CAPTURE`` (its scan image; the truth linked to the original's); returns that directory."""
+    dst = out / f"{name}-{cap.name}"
+    (dst / "scan").mkdir(parents=True, exist_ok=True)
+    if not (dst / "truth").exists():
+        (dst / "truth").symlink_to((cap / "truth").resolve(), target_is_directory=True)
+    img, transform = read_image(cap / "scan" / f"{view}.png"), FRAMES[name]
+    cv2.imwrite(str(dst / "scan" / f"{view}.png"), img if transform is None else transform(img))
+    return dst
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--size", default="3072x2048")
     ap.add_argument("--cache", default="/tmp/bodyscan-bench")
     ap.add_argument("--seeds", default="4,8")
     ap.add_argument("--frames", default="none,dark,vignette,blur")
+    ap.add_argument("--save", type=Path, default=None,
+                    help="also write each transformed view as a capture DIR/FRAME-CAPTURE (scan/VIEW.png, the truth "
+                         "linked) for bench/mislabels.py, bench/pieces.py and bench/cache.py dump --cache DIR")
     args = ap.parse_args()
     size = tuple(int(v) for v in args.size.split("x"))
     cache = Path(args.cache)
@@ -102,6 +119,8 @@ def main() -> None:
             cap = capture_for(cache, int(stripes), kind == "fur", size, seed)
             for view in ("side", "top"):
                 for name in frames:
+                    if args.save is not None:
+                        save(cap, view, name, args.save)
                     e = evaluate(cap, view, frame=FRAMES[name])
                     length, height = e["body_length_mm"], e["body_height_mm"]
                     t = totals[name]

@@ -14,7 +14,6 @@ wrong segment, the far leg's stripe 18 read as 17 (`docs/benchmarks.md`, that da
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -23,28 +22,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import measurement.matching as matching  # noqa: E402
-from bench.common import ANIMAL, VIEWS  # noqa: E402
-from measurement.calibration import load_calibration  # noqa: E402
-from measurement.detection import detect_centres_and_faint  # noqa: E402
-from measurement.images import read_image  # noqa: E402
-from measurement.matching import denoise, label_centres  # noqa: E402
+from bench.common import ANIMAL, captures_main, counts, scan_input  # noqa: E402
+from measurement.matching import label_centres  # noqa: E402
 from measurement.pipeline import ScanParams  # noqa: E402
 from measurement.simulate.truth import match_crossings  # noqa: E402
-from measurement.triangulation import ray_table, rays_and_cells  # noqa: E402
-
-
-def _counts(values: np.ndarray) -> str:
-    ks, n = np.unique(values, return_counts=True)
-    return " ".join(f"{k}x{c}" for k, c in zip(ks.tolist(), n.tolist(), strict=True))
 
 
 def report(cap: Path, view: str, drops: int) -> None:
-    cal = load_calibration(cap / "truth" / "truth.json")
-    img = read_image(cap / "scan" / f"{view}.png")
-    params = ScanParams()
-    c, _ = detect_centres_and_faint(img, params.detection, None)
-    c = c.take(denoise(c, img.shape[:2]))
-    rays = rays_and_cells(c.u, c.v, ray_table(cal.intrinsics, cal.transposed))[0]
+    inp = scan_input(cap, view)
+    cal, c, rays = inp.cal, inp.centres, inp.rays
     before = np.full(len(c), -1, np.int64)  # the label a centre had where the row-order check dropped it
     check = matching._enforce_row_order
 
@@ -56,7 +42,7 @@ def report(cap: Path, view: str, drops: int) -> None:
 
     matching._enforce_row_order = recorded
     try:
-        lab = label_centres(c, rays, cal.planes, img.shape[:2], params.matching, view)
+        lab = label_centres(c, rays, cal.planes, inp.shape, ScanParams().matching, view)
     finally:
         matching._enforce_row_order = check
     truth, kind = match_crossings(np.column_stack([c.u, c.v]), dict(np.load(cap / "truth" / f"{view}_stripes.npz")))
@@ -68,8 +54,8 @@ def report(cap: Path, view: str, drops: int) -> None:
     for s in np.unique(seg[wrong]):
         m = seg == s
         print(f"  wrong segment {s}: {m.sum()} centres, rows {c.v[m].min()}-{c.v[m].max()}, "
-              f"u ~{np.median(c.u[m]):.0f}; labels {_counts(k[m & wrong])}, truth {_counts(truth[m & wrong])}, "
-              f"{wrong[m].sum()} wrong; kinds {_counts(kind[m])}")
+              f"u ~{np.median(c.u[m]):.0f}; labels {counts(k[m & wrong])}, truth {counts(truth[m & wrong])}, "
+              f"{wrong[m].sum()} wrong; kinds {counts(kind[m])}")
     dropped = before >= 0
     print(f"  row order dropped {dropped.sum()} centres, {(dropped & animal).sum()} of the animal "
           f"({(dropped & animal & (before == truth)).sum()} of them right)")
@@ -77,20 +63,12 @@ def report(cap: Path, view: str, drops: int) -> None:
     for s in segs[np.argsort(-n, kind="stable")][:drops]:
         d = dropped & (seg == s)
         print(f"    segment {s}: {d.sum()} of {(seg == s).sum()} centres, rows {c.v[d].min()}-{c.v[d].max()}, "
-              f"u ~{np.median(c.u[d]):.0f}; had {_counts(before[d])}, truth {_counts(truth[d])}, "
-              f"kinds {_counts(kind[d])}")
+              f"u ~{np.median(c.u[d]):.0f}; had {counts(before[d])}, truth {counts(truth[d])}, "
+              f"kinds {counts(kind[d])}")
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("captures", nargs="+", type=Path)
-    ap.add_argument("--view", choices=VIEWS, default=None, help="one view (default: both)")
-    ap.add_argument("--drops", type=int, default=10, help="row-order drop groups to list per view")
-    args = ap.parse_args()
-    for cap in args.captures:
-        for view in (args.view,) if args.view else VIEWS:
-            if (cap / "scan" / f"{view}.png").exists():
-                report(cap, view, args.drops)
+    captures_main(__doc__, report, "drops", 10, "row-order drop groups to list per view")
 
 
 if __name__ == "__main__":
