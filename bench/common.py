@@ -12,12 +12,13 @@ import numpy as np
 
 import measurement.matching as matching
 from measurement.calibration import Calibration, load_calibration
-from measurement.detection import Centres, detect_centres
+from measurement.detection import Centres, detect_centres, detect_centres_and_faint
 from measurement.images import read_image
 from measurement.matching import denoise, label_centres
+from measurement.pipeline import ScanParams
 from measurement.simulate.capture import write_capture
 from measurement.simulate.truth import match_crossings
-from measurement.triangulation import ray_table, rays_at
+from measurement.triangulation import ray_table, rays_and_cells, rays_at
 
 ANIMAL = 5
 VIEWS = ("side", "top")
@@ -35,10 +36,7 @@ class ScanInput:
 
 
 def scan_input(cap: Path, view: str) -> ScanInput:
-    from measurement.detection import detect_centres_and_faint
-    from measurement.pipeline import ScanParams
-    from measurement.triangulation import rays_and_cells
-
+    """``ScanInput`` of a cached view (no ambient image; the true calibration's camera is linear)."""
     cal = load_calibration(cap / "truth" / "truth.json")
     img = read_image(cap / "scan" / f"{view}.png")
     c, _ = detect_centres_and_faint(img, ScanParams().detection, None)
