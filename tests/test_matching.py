@@ -312,6 +312,7 @@ def test_pieces_are_weighed_largest_first(monkeypatch):
     seg = np.arange(500) // 50  # ten segments of 50 centres
     leg = (np.arange(0, 100), {0: 20, 1: 20})
     body = (np.arange(100, 500), {s: 20 + s for s in range(2, 10)})
+    monkeypatch.setattr(m, "_Grower", lambda *args: None)  # (its pieces are given)
     monkeypatch.setattr(m, "_pieces", lambda *args: [leg, body])
     monkeypatch.setattr(m, "projector_right", lambda planes: True)
     weighed_sizes = []
@@ -876,20 +877,64 @@ def test_a_piece_seeded_off_the_middle_grows_to_both_ends_of_the_pattern(monkeyp
     its pattern-edge wall (the shared shiba's and cow's top views were placed one or two stripes off, or
     refused). Growth runs over virtual stripes beyond the pattern, so the piece holds every stripe."""
     import measurement.matching as m
-    from measurement.matching import _neighbour_pairs, _pieces
+    from measurement.matching import _Grower, _neighbour_pairs, _pieces
 
     planes, rays, seg, left, right, lab = _steep_ramp(
         0.0, range(40), lambda k: np.arange(-60, 60) if k == 12 else np.arange(-40, 40))
     long_seg = np.ones(len(seg), bool)
     pairs = _neighbour_pairs(seg, long_seg, left, right)
-    (idx, trial), = _pieces(None, rays, planes, seg, {}, long_seg, left, right, 20.0, 40, pairs, 20)
+    (idx, trial), = _pieces(_Grower(None, rays, planes, seg, {}, long_seg, 20.0, 40, pairs, None), 20)
     assert len(idx) == len(seg)
     k = {int(lab[seg == s][0]): v for s, v in trial.items()}  # true stripe -> provisional label
     assert sorted(k) == list(range(40))
     assert all(k[s] - k[12] == s - 12 for s in k) and k[12] == 20
     monkeypatch.setattr(m, "PIECE_PAD", 0.0)  # held to the pattern's indices, as before
-    pieces = _pieces(None, rays, planes, seg, {}, long_seg, left, right, 20.0, 40, pairs, 20)
+    pieces = _pieces(_Grower(None, rays, planes, seg, {}, long_seg, 20.0, 40, pairs, None), 20)
     assert [len(p[0]) for p in pieces] == [2600, 640]
+
+
+def test_growth_at_the_seeds_own_index_crosses_a_turning_surface_that_the_middle_index_does_not():
+    """Depth continuity is judged on the planes a trial's provisional indices put each segment on. A surface
+    receding at 39 degrees (a chest turning away, seen from the side), its stripes 7 mm apart in depth,
+    seeded at stripe 4 but grown as if it were the middle stripe 20: the steps come out 47-57 mm and the
+    trial stops at its seed. Grown at the seed's true index (as ``_foreground`` grows a first piece again
+    once its offset is read, ``_regrown``) it takes all ten stripes, one index apart."""
+    from measurement.matching import _Grower, _neighbour_pairs
+
+    planes, rays, seg, left, right, lab = _steep_ramp(0.8, range(2, 12), np.arange(-40, 40, 2))
+    long_seg = np.ones(len(seg), bool)
+    grower = _Grower(None, rays, planes, seg, {}, long_seg, 20.0, 40, _neighbour_pairs(seg, long_seg, left, right),
+                     None)
+    seed = int(seg[lab == 4][0])
+    segs, _ = grower.trial(seed, 20)
+    assert segs.tolist() == [seed]
+    segs, labs = grower.trial(seed, 4)
+    truth = {int(s): int(lab[seg == s][0]) for s in segs}
+    assert sorted(truth.values()) == list(range(2, 12))
+    assert all(k - grower.pad == truth[int(s)] for s, k in zip(segs, labs, strict=True))
+
+
+def test_a_small_piece_read_far_from_the_animal_is_not_placed_there():
+    """A small piece read by its own conflict curve can find a sharp minimum many stripes off (a dim thigh
+    seen from the side was placed nine stripes low, 380 mm behind the animal). ``_place_small`` places a
+    piece only where its nearest point lies within ``SMALL_APART`` of the animal's size from the labelled
+    animal: the same stripe of a flat surface is taken at its own index, refused nine stripes off."""
+    from measurement.matching import SMALL_APART, _NearAnimal
+    from measurement.triangulation import intersect
+
+    planes, rays, seg, left, right, lab = _steep_ramp(0.0, range(4, 20), np.arange(-200, 200, 2))
+    animal = seg < 12  # stripes 4-15 labelled the animal; 16-19 are the piece
+    seg_label = {int(s): int(lab[seg == s][0]) for s in np.unique(seg[animal])}
+    near = _NearAnimal(rays, planes, seg, seg_label, {}, np.ones(len(seg), bool))
+    piece = np.flatnonzero(~animal)
+    p_right = intersect(rays[piece], planes[lab[piece]])
+    p_low = intersect(rays[piece], planes[lab[piece] - 9])
+    ref = intersect(rays[animal], planes[lab[animal]])
+    size = np.linalg.norm(np.percentile(ref, 98, axis=0) - np.percentile(ref, 2, axis=0))
+    gap = lambda p: np.linalg.norm(p[:, None] - ref[None, ::7], axis=2).min()  # noqa: E731
+    assert gap(p_right) < SMALL_APART * size / 4 and gap(p_low) > 2 * SMALL_APART * size
+    assert not near.takes(piece, lab[piece] - 9)
+    assert near.takes(piece, lab[piece])
 
 
 def test_virtual_planes_go_on_turning_about_the_pencils_axis():
