@@ -22,15 +22,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import measurement.matching as matching  # noqa: E402
-from bench.common import ANIMAL, scan_input  # noqa: E402
+from bench.common import ANIMAL, ScanInput, scan_input  # noqa: E402
 from measurement.matching import label_centres  # noqa: E402
 from measurement.pipeline import ScanParams  # noqa: E402
 from measurement.simulate.truth import match_crossings  # noqa: E402
 
 
-def weighed_pieces(cap: Path) -> list[tuple[np.ndarray, np.ndarray, float, bool]]:
-    """The side view's small pieces ``_NearAnimal`` weighed: centres (K,), labels (K,), the nearest point's
-    distance as a share of the animal's size, and whether the piece was placed."""
+def weighed_pieces(inp: ScanInput) -> list[tuple[np.ndarray, np.ndarray, float, bool]]:
+    """The small pieces ``_NearAnimal`` weighed in a side view (``scan_input``): centres (K,), labels (K,), the
+    nearest point's distance as a share of the animal's size, and whether the piece was placed."""
     seen: list[tuple[np.ndarray, np.ndarray, float, bool]] = []
     takes = matching._NearAnimal.takes
 
@@ -44,7 +44,6 @@ def weighed_pieces(cap: Path) -> list[tuple[np.ndarray, np.ndarray, float, bool]
             seen.append((idx, lab, gap * matching.SMALL_APART / self.reach, placed))
         return placed
 
-    inp = scan_input(cap, "side")
     matching._NearAnimal.takes = recorded  # type: ignore[method-assign]
     try:
         label_centres(inp.centres, inp.rays, inp.cal.planes, inp.shape, ScanParams().matching, "side")
@@ -61,10 +60,11 @@ def main() -> None:
     for cap in caps:
         if not (cap / "scan" / "side.png").exists():
             continue
-        pieces = weighed_pieces(cap)
+        inp = scan_input(cap, "side")
+        pieces = weighed_pieces(inp)
         if not pieces:
             continue
-        c = scan_input(cap, "side").centres
+        c = inp.centres
         truth, kind = match_crossings(np.column_stack([c.u, c.v]), dict(np.load(cap / "truth" / "side_stripes.npz")))
         for idx, lab, share, placed in pieces:
             an = kind[idx] == ANIMAL

@@ -623,9 +623,7 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         if off is None:
             continue
         lab = rel[seg[idx]] + off
-        inside = (lab >= 0) & (lab < n)
-        if inside.mean() < 0.8 or np.mean(depth_in_range(rays.take(idx[inside], axis=0), planes, lab[inside],
-                                                         *zrange)) < 0.9:
+        if not _fits(rays, planes, idx, lab, n, zrange):
             continue
         seed = next(iter(trial), None)  # its index: the trial's (mid, unless the refinement moved it) + off
         if first is None and seed is not None and abs(int(rel[seed]) + off - mid) >= REGROW_STRIPES:
@@ -688,9 +686,9 @@ def _regrown(grower: _Grower, rays, planes, seg, n, seed: int, at: int, off: int
     Read again from the side as well, the offset refused the blurred views' growth; not read again from
     above or with one background plane, a rig 200 mm higher (no floor found) took 2293 floor centres into
     its piece and a top view from 150 mm lower grew slipped labels, both then placed wrong."""
+    own = np.unique(seg[idx])
     free = grower.free.copy()
     if bg_planes is not None:  # not over the floor and wall: growth at the true index runs on down the legs
-        own = np.unique(seg[idx])
         like = background_like(rays, planes, seg, free[seg] & grower.long_seg, bg_planes, set(own.tolist()))
         free[np.unique(seg[like])] = False
     free[seed] = True
@@ -701,7 +699,6 @@ def _regrown(grower: _Grower, rays, planes, seg, n, seed: int, at: int, off: int
     # the piece as it was must come out as it was (growth on other planes takes other paths, and one that
     # loses or relabels what the first reading held is no better grown), and what it adds must not lie
     # behind the floor or wall (a wall's stripes taken one index off past a sitting animal's ears)
-    own = np.unique(seg[idx])
     had = np.isin(own, np.fromiter(trial2, np.int64))
     sizes = np.bincount(seg[idx], minlength=seg.max() + 1)
     same = np.array([trial2.get(int(s), -10**6) - off for s in own[had]]) == rel_first[own[had]]
@@ -719,11 +716,17 @@ def _regrown(grower: _Grower, rays, planes, seg, n, seed: int, at: int, off: int
             shallow=True, footprint=footprint, from_above=from_above) != off:
         return None
     lab2 = rel2[seg[idx2]] + off
-    inside = (lab2 >= 0) & (lab2 < n)
-    if inside.mean() < 0.8 or np.mean(depth_in_range(rays.take(idx2[inside], axis=0), planes, lab2[inside],
-                                                      *zrange)) < 0.9:
+    if not _fits(rays, planes, idx2, lab2, n, zrange):
         return None
     return idx2, trial2, rel2, lab2
+
+
+def _fits(rays, planes, idx: np.ndarray, lab: np.ndarray, n: int, zrange: tuple[float, float]) -> bool:
+    """Whether a piece placed (centres ``idx`` (K,) at labels ``lab`` (K,)) has 80 % of its centres on the
+    pattern's stripes and 90 % of those in the working range ``zrange`` (mm)."""
+    inside = (lab >= 0) & (lab < n)
+    return not (inside.mean() < 0.8 or np.mean(depth_in_range(rays.take(idx[inside], axis=0), planes, lab[inside],
+                                                              *zrange)) < 0.9)
 
 
 CONTACT_MM = (12.0, 20.0)  # a piece touches another under the first, is apart from it over the second
