@@ -18,6 +18,7 @@ from .calibration import Calibration
 from .detection import (
     DetectionParams,
     check_image,
+    clipped,
     detect_centres,
     detect_centres_and_faint,
     reliable,
@@ -195,6 +196,15 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
         wide = _with_merged(wide, np.flatnonzero(merged), centres, labels, smooth_u, cells, table, calibration.planes,
                             margin)
     meas = measure(animal_pts, animal_stripe, rows[animal], view, params.body, ends, wide)
+    # a stripe profile narrower than the optics make it is cut by an outline: its centroid is off by a pixel or
+    # two, which a body's extremes hundreds of mm apart barely feel (the measurement reads them as before) but a
+    # point picked on the cloud does: the cloud and the scene leave them out
+    sharp = ~clipped(centres, params.detection).take(idx)
+    if not sharp.all():
+        pts, stripe, uv, rows, animal = pts[sharp], stripe[sharp], uv[sharp], rows[sharp], animal[sharp]
+        idx = idx[sharp]
+        animal_pts, animal_stripe = pts[animal], stripe[animal]
+        meas["point_count"] = int(len(animal_pts))
     t["measure"] = time.perf_counter()
     stages = ["start", "detect", "denoise", "match", "triangulate", "measure"]
     timings = {s: round(1000 * (t[s] - t[p]), 2) for p, s in zip(stages, stages[1:], strict=False)}

@@ -10,6 +10,7 @@ from measurement.detection import (
     algorithm2_boundaries,
     algorithm2_centres,
     check_image,
+    clipped,
     detect_centres,
     detect_centres_and_faint,
     noise_sigma,
@@ -119,6 +120,18 @@ def test_a_stripe_widened_at_a_grazing_surface_is_unreliable():
     ok = reliable(c)
     widened = np.abs(c.u - 300) < 2
     assert widened.any() and ok[~widened].all() and not ok[widened].any()
+
+
+def test_a_stripe_cut_by_an_outline_is_clipped_and_its_centroid_is_off():
+    x = np.arange(3072, dtype=float)
+    whole = sum(100 * np.exp(-0.5 * ((x - m) / 2.5) ** 2) for m in (40, 80, 120, 160, 200, 240))
+    cut = np.where(x <= 300.5, 100 * np.exp(-0.5 * ((x - 300) / 2.5) ** 2), 0.0)  # an outline hides its right half
+    c = detect_centres(_row_image(10 + whole + cut))
+    at_cut = np.abs(c.u - 300) < 3
+    flagged = clipped(c)
+    assert at_cut.any() and flagged[at_cut].all() and not flagged[~at_cut].any()
+    assert np.abs(c.u[at_cut] - 300).min() > 0.5  # what keeps it out of the cloud: its centroid is off
+    assert not clipped(c, DetectionParams(min_width=0)).any()
 
 
 def test_with_hysteresis_a_faint_stripe_end_is_followed_from_its_bright_part_but_a_faint_stripe_alone_is_not():

@@ -70,6 +70,27 @@ def test_paper_definitions_match_the_true_stripe_points(small_capture, truth_cal
     assert len(r.measurements["body_length"]["points"]) == 2
 
 
+def test_clipped_centres_stay_out_of_the_cloud_but_not_out_of_the_measurement(small_capture, truth_cal):
+    from dataclasses import replace
+
+    from measurement.pipeline import ScanParams
+
+    img = read_image(small_capture / "scan" / "side.png")
+
+    def scanned(min_width: float):
+        p = ScanParams()
+        return scan(img, truth_cal, "side", params=replace(p, detection=replace(p.detection, min_width=min_width)))
+
+    # this 1024 px render's stripes are 3 px wide: at the default share only 1 px runs count as cut; ask for more
+    every, strict = scanned(0.0), scanned(0.9)
+    assert len(strict.points) < 0.97 * len(every.points) and len(strict.scene_points) < len(every.scene_points)
+    kept = {(round(u, 3), v) for u, v in every.uv.tolist()}
+    assert all((round(u, 3), v) in kept for u, v in strict.uv.tolist())  # a subset of the same points
+    assert strict.measurements["point_count"] == len(strict.points)
+    for name in ("body_length_mm", "body_height_mm", "stripes_detected"):
+        assert strict.measurements[name] == every.measurements[name]
+
+
 def test_a_tiled_floor_is_told_from_the_animal(tmp_path):
     """Dark grout lines every 150 mm: their edges beside the stripe field are peaks in every row, and the
     floor used to go unlabelled and join the animal (body height +100 % on this render)."""
