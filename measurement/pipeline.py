@@ -180,10 +180,11 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
         tip = np.flatnonzero(np.isin(seg_ids.take(idx), labels.tips))
         off = np.abs(pts[tip] @ labels.background[:, :3].T - labels.background[:, 3]).min(axis=1) > margin
         animal[tip[off]] = True
-    animal_pts, animal_stripe = pts[animal], stripe[animal]
+    on = np.flatnonzero(animal)  # (rows taken by index: a boolean mask over the scene's rows costs several times more)
+    animal_pts, animal_stripe = pts.take(on, axis=0), stripe.take(on)
     ends = None
     if faint is not None and len(animal_pts):
-        eu, ev, ek, ew = faint_ends(centres, labels.stripe, seg_ids, idx[animal], idx, faint,
+        eu, ev, ek, ew = faint_ends(centres, labels.stripe, seg_ids, idx.take(on), idx, faint,
                                     params.matching.link_px * max(image.shape[1] / 3072.0, 0.5), image.shape[0],
                                     over_background=view == "top", order=by_segment)
         if len(eu):
@@ -195,15 +196,17 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     if merged.any() and len(animal_pts):
         wide = _with_merged(wide, np.flatnonzero(merged), centres, labels, smooth_u, cells, table, calibration.planes,
                             margin)
-    meas = measure(animal_pts, animal_stripe, rows[animal], view, params.body, ends, wide)
+    meas = measure(animal_pts, animal_stripe, rows.take(on), view, params.body, ends, wide)
     # a stripe profile narrower than the optics make it is cut by an outline: its centroid is off by a pixel or
     # two, which a body's extremes hundreds of mm apart barely feel (the measurement reads them as before) but a
     # point picked on the cloud does: the cloud and the scene leave them out
-    sharp = ~clipped(centres, params.detection).take(idx)
-    if not sharp.all():
-        pts, stripe, uv, rows, animal = pts[sharp], stripe[sharp], uv[sharp], rows[sharp], animal[sharp]
-        idx = idx[sharp]
-        animal_pts, animal_stripe = pts[animal], stripe[animal]
+    cut = clipped(centres, params.detection).take(idx)
+    if cut.any():
+        keep = np.flatnonzero(~cut)
+        pts, uv = pts.take(keep, axis=0), uv.take(keep, axis=0)
+        stripe, animal, idx = stripe.take(keep), animal.take(keep), idx.take(keep)
+        on = np.flatnonzero(animal)
+        animal_pts, animal_stripe = pts.take(on, axis=0), stripe.take(on)
         meas["point_count"] = int(len(animal_pts))
     t["measure"] = time.perf_counter()
     stages = ["start", "detect", "denoise", "match", "triangulate", "measure"]
@@ -214,16 +217,17 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     meas["unplaced_share"] = round(labels.unplaced / labels.pieces, 4) if labels.pieces else 0.0
     # how bright the stripes on the animal stand above their surroundings (8-bit gray levels; not read off
     # the few stray points left when the animal could not be placed)
-    on_animal = idx[animal]
+    on_animal = idx.take(on)
+    animal_uv = uv.take(on, axis=0)
     meas["animal_contrast"] = (round(float(np.median(centres.contrast.take(on_animal))), 1)
                                if len(on_animal) >= 200 else None)
-    meas["saturated_share"] = saturated_share(image, uv[animal])
-    meas["frame_edges"] = (frame_edges(uv[animal][:, ::-1], (image.shape[1], image.shape[0])) if calibration.transposed
-                           else frame_edges(uv[animal], image.shape[:2]))
+    meas["saturated_share"] = saturated_share(image, animal_uv)
+    meas["frame_edges"] = (frame_edges(animal_uv[:, ::-1], (image.shape[1], image.shape[0])) if calibration.transposed
+                           else frame_edges(animal_uv, image.shape[:2]))
     # the stripes' median width at half height, against the width the detector's windows were set for
     meas["stripe_width_px"] = round(centres.median_width, 1) if len(centres) else None
     meas["warnings"] = _warnings(meas, labels, stripe_width_ratio(centres, image.shape[1]) if len(centres) else None)
-    return ScanResult(animal_pts, animal_stripe, uv[animal], pts, stripe, uv, meas, timings)
+    return ScanResult(animal_pts, animal_stripe, animal_uv, pts, stripe, uv, meas, timings)
 
 
 def _wide_peaks(centres, unreliable: np.ndarray, labels: Labels, animal_stripe: np.ndarray, animal_pts: np.ndarray,
