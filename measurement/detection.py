@@ -534,16 +534,19 @@ def reliable(c: Centres, params: DetectionParams = DetectionParams()) -> np.ndar
     return ok
 
 
-def clipped(c: Centres, params: DetectionParams = DetectionParams()) -> np.ndarray:
+def clipped(c: Centres, params: DetectionParams = DetectionParams(), reference: float | None = None) -> np.ndarray:
     """(M,) bool: centres whose run above half height (``Centres.width``) is narrower than ``min_width`` of
     the image's median: a profile cut by an outline in front of it, or running off the edge of the surface it
     lights, has lost one side, and its centroid lies off the plane's image toward the other. The stripe's
     width is set by the projector's focus and the camera's blur; a surface turned away from the camera narrows
     it too, but such a stripe grazes an outline as well. Like ``reliable``, for keeping centres out of the cloud,
-    not out of the labelling. Measured in docs/benchmarks.md (2026-12-04)."""
+    not out of the labelling. ``reference`` : the width (pixels) to compare with, the image's median
+    (``Centres.median_width``) if None; the scan passes the animal's own, as a wall or floor out of focus
+    widens its stripes and would otherwise cut every stripe of an animal in focus. Measured in
+    docs/benchmarks.md (2026-12-04)."""
     if len(c) == 0 or params.min_width <= 0:
         return np.zeros(len(c), bool)
-    return c.width < params.min_width * c.median_width
+    return c.width < params.min_width * (c.median_width if reference is None else reference)
 
 
 def check_image(image: np.ndarray, expected: tuple[int, int] | None, name: str = "image") -> None:

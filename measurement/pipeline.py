@@ -197,10 +197,11 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
         wide = _with_merged(wide, np.flatnonzero(merged), centres, labels, smooth_u, cells, table, calibration.planes,
                             margin)
     meas = measure(animal_pts, animal_stripe, rows.take(on), view, params.body, ends, wide)
-    # a stripe profile narrower than the optics make it is cut by an outline: its centroid is off by a pixel or
-    # two, which a body's extremes hundreds of mm apart barely feel (the measurement reads them as before) but a
-    # point picked on the cloud does: the cloud and the scene leave them out
-    cut = clipped(centres, params.detection).take(idx)
+    # a stripe profile narrower than the optics make it on the animal is cut by an outline: its centroid is off
+    # by a pixel or two, which a body's extremes hundreds of mm apart barely feel (the measurement reads them as
+    # before) but a point picked on the cloud does: the cloud and the scene leave them out
+    on_width = centres.width.take(idx.take(on))
+    cut = clipped(centres, params.detection, float(np.median(on_width)) if len(on_width) >= 200 else None).take(idx)
     if cut.any():
         keep = np.flatnonzero(~cut)
         pts, uv = pts.take(keep, axis=0), uv.take(keep, axis=0)

@@ -132,6 +132,7 @@ def test_a_stripe_cut_by_an_outline_is_clipped_and_its_centroid_is_off():
     assert at_cut.any() and flagged[at_cut].all() and not flagged[~at_cut].any()
     assert np.abs(c.u[at_cut] - 300).min() > 0.5  # what keeps it out of the cloud: its centroid is off
     assert not clipped(c, DetectionParams(min_width=0)).any()
+    assert clipped(c, reference=2 * c.median_width).all()  # against stripes twice as wide (the scan: the animal's)
 
 
 def test_with_hysteresis_a_faint_stripe_end_is_followed_from_its_bright_part_but_a_faint_stripe_alone_is_not():
