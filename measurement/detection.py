@@ -50,8 +50,8 @@ class DetectionParams:
                     rising side of an albedo or shadow edge is not)
     max_width     : a reliable centre is at most this many times the image's median stripe width (a stripe
                     widened by a grazing surface has its centroid off the plane's image)
-    min_width     : a centre narrower than this share of the image's median stripe width is ``clipped``: part
-                    of its profile is hidden, its centroid with it (0: none is)
+    min_width     : a centre narrower than this share of the animal's median stripe width (``clipped``) has
+                    part of its profile hidden, and its centroid moved with it: it stays out of the cloud (0: none)
     faint_contrast, faint_k : ``detect_centres_and_faint`` also lists the faint peaks, above
                     max(faint_contrast, faint_k x the smoothed noise) but not above min_contrast, two-sided
                     (see min_flank), apart from the centres: where a stripe grazes the outline (the flank seen
@@ -536,7 +536,7 @@ def reliable(c: Centres, params: DetectionParams = DetectionParams()) -> np.ndar
 
 def clipped(c: Centres, params: DetectionParams = DetectionParams(), reference: float | None = None) -> np.ndarray:
     """(M,) bool: centres whose run above half height (``Centres.width``) is narrower than ``min_width`` of
-    the image's median: a profile cut by an outline in front of it, or running off the edge of the surface it
+    the ``reference`` width: a profile cut by an outline in front of it, or running off the edge of the surface it
     lights, has lost one side, and its centroid lies off the plane's image toward the other. The stripe's
     width is set by the projector's focus and the camera's blur; a surface turned away from the camera narrows
     it too, but such a stripe grazes an outline as well. Like ``reliable``, for keeping centres out of the cloud,
