@@ -43,6 +43,7 @@ SMOOTH_JUMP_PX = 2.0  # px (at 3072) per row: a segment that goes on from anothe
 # <= 0.5 mm 37 -> 40, >= 99.5 % within 2 mm 11 -> 12, fur views 0.18 points more within 2 mm and 0.019 mm
 # less RMS, clean ones +0.004 mm; every view at 12 rows: clean RMS +0.039 mm (0.103 -> 0.149 on a top view)
 NOISY_RUN_PX, NOISY_REACH = 0.13, 12
+ANIMAL_MEDIAN_MIN = 200  # animal centres from which their median (contrast, stripe width) speaks for the animal
 
 
 @dataclass(frozen=True)
@@ -201,7 +202,8 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     # by a pixel or two, which a body's extremes hundreds of mm apart barely feel (the measurement reads them as
     # before) but a point picked on the cloud does: the cloud and the scene leave them out
     on_width = centres.width.take(idx.take(on))
-    cut = clipped(centres, params.detection, float(np.median(on_width)) if len(on_width) >= 200 else None).take(idx)
+    cut = clipped(centres, params.detection,
+                  float(np.median(on_width)) if len(on_width) >= ANIMAL_MEDIAN_MIN else None).take(idx)
     if cut.any():
         keep = np.flatnonzero(~cut)
         pts, uv = pts.take(keep, axis=0), uv.take(keep, axis=0)
@@ -221,7 +223,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     on_animal = idx.take(on)
     animal_uv = uv.take(on, axis=0)
     meas["animal_contrast"] = (round(float(np.median(centres.contrast.take(on_animal))), 1)
-                               if len(on_animal) >= 200 else None)
+                               if len(on_animal) >= ANIMAL_MEDIAN_MIN else None)
     meas["saturated_share"] = saturated_share(image, animal_uv)
     meas["frame_edges"] = (frame_edges(animal_uv[:, ::-1], (image.shape[1], image.shape[0])) if calibration.transposed
                            else frame_edges(animal_uv, image.shape[:2]))
