@@ -591,7 +591,8 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     sets what every later one is read against (seeded from its longest segment, a leg seen from the side
     at 3072 px could come first and be refused, and then the body was read without the leg's cells).
     Pieces under ``SMALL_PIECE`` of the largest are returned for ``_place_small``, which runs after
-    growth from the placed pieces had its turn."""
+    growth from the placed pieces had its turn. A largest piece refused because its relative labels span
+    more stripes than the pattern has is placed block by block (``_split_overspread``)."""
     out: dict[int, int] = {}
     cl = _labels_of(seg, seg_label, long_seg)
     lit = bg_lit
@@ -604,7 +605,10 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
     found = sorted(_pieces(grower, mid), key=lambda piece: -len(piece[0]))
     largest = len(found[0][0]) if found else 0
     taken = None  # the segments of a first piece grown again at its seed's index, which no later piece keeps
-    for idx, trial in found:
+    split = False  # whether the first piece was split into its blocks
+    queue = [(idx, trial, False) for idx, trial in found]
+    while queue:
+        idx, trial, is_block = queue.pop(0)  # (a block: a part of a piece split by ``_split_overspread``)
         if taken is not None:
             idx = idx[~taken[seg[idx]]]
             trial = {sid: lab for sid, lab in trial.items() if not taken[sid]}
@@ -621,12 +625,20 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
         if _TRACE is not None:
             _TRACE.append((idx, rel[seg[idx]], off))
         if off is None:
+            if not split and first is None and len(idx) == largest:
+                blocks = _split_overspread(c, seg, idx, rel, left, right, n)
+                if blocks:  # placed one by one (once per view: a block is not split again)
+                    split = True
+                    largest = len(blocks[0])
+                    queue = [(b, _part_of(trial, seg.take(b)), True) for b in blocks] + queue
             continue
         lab = rel[seg[idx]] + off
         if not _fits(rays, planes, idx, lab, n, zrange):
             continue
         seed = next(iter(trial), None)  # its index: the trial's (mid, unless the refinement moved it) + off
-        if first is None and seed is not None and abs(int(rel[seed]) + off - mid) >= REGROW_STRIPES:
+        # (a block of a split piece is not: growth from it would cross the depth step it was split at)
+        if (first is None and seed is not None and not is_block
+                and abs(int(rel[seed]) + off - mid) >= REGROW_STRIPES):
             grown = _regrown(grower, rays, planes, seg, n, seed, int(rel[seed]) + off, off, idx, rel, cl, lit,
                              bg_planes, table, footprint, from_above, zrange)
             if grown is not None:
@@ -651,6 +663,39 @@ def _foreground(c, rays, planes, seg, seg_label, long_seg, left, right, tol, n, 
                 out.update(_placed(p_trial, p_rel, p_off, n))
                 lit = _claim(rays, planes, cl, lit, p_idx, p_rel[seg[p_idx]] + p_off)
     return out, small, cl, lit, first, first_shallow
+
+
+SPLIT_MAIN = 0.5  # an overspread piece is split into its blocks if its largest holds this share of it
+
+
+def _split_overspread(c, seg, idx, rel, left, right, n: int) -> list[np.ndarray]:
+    """The blocks (``_blocks``) of a refused piece (centres ``idx`` (K,), relative labels ``rel`` (S,)) whose
+    relative labels span more stripes than the pattern has (``n``): growth carried them across a depth step
+    it misread somewhere (a spot cow seen from above, its raised head grown onto its back three stripes off:
+    relative labels over 43 of the 40 stripes, the whole animal unplaced), and the image's rigid blocks (one
+    label a stripe between clean neighbours) are placed one by one instead. (Pieces that span the pattern by
+    a stray segment or two at an edge are common and mostly placed right: split before their reading, 13 of
+    148 cached views changed, and the blocks of five cow-like shapes seen from above, each read by its own
+    curve, were placed wrong where the whole pieces were right on two. Only a refused piece is split.)
+    The blocks of at least 50 centres, largest first; none where the span fits the pattern or the largest
+    block holds under ``SPLIT_MAIN`` of the piece."""
+    r = rel.take(seg.take(idx))
+    if int(r.max() - r.min()) < n:
+        return []
+    lab = np.full(len(c), -1, np.int64)
+    lab[idx] = r - r.min()
+    block = _blocks(c, seg, lab, left, right).take(seg.take(idx))
+    ids, counts = np.unique(block, return_counts=True)
+    order = np.argsort(-counts, kind="stable")
+    if counts[order[0]] < SPLIT_MAIN * len(idx):
+        return []
+    return [idx[block == ids[j]] for j in order if counts[j] >= 50]
+
+
+def _part_of(trial: dict[int, int], segs: np.ndarray) -> dict[int, int]:
+    """The entries of a segment -> label map whose segments are among ``segs``, in the map's order."""
+    keep = set(segs.tolist())
+    return {sid: lab for sid, lab in trial.items() if sid in keep}
 
 
 REGROW_STRIPES = 2  # a first piece whose seed lies this many stripes or more off the middle is grown again

@@ -870,6 +870,35 @@ def test_a_block_of_the_animal_read_stripes_into_its_conflicts_is_moved_back(top
     assert all(back[s] == k for s, k in fg.items() if s not in end)
 
 
+def test_a_piece_whose_labels_span_more_stripes_than_the_pattern_splits_into_its_rigid_blocks(top_blocks):
+    """Growth that misreads a depth step carries the labels beyond it a few stripes off (a spot cow seen from
+    above, its raised head grown onto the back three stripes off: relative labels over 43 of the 40 stripes,
+    and no offset could place the piece: the whole animal was left unplaced). Such a piece splits into the
+    image's rigid blocks, to be placed one by one. Here the top view's animal, its head end's six stripes
+    grown three stripes off: the blocks part at the slip, the largest holding the body; a piece that fits
+    the pattern does not split."""
+    from measurement.matching import _split_overspread
+
+    c, rays, planes, seg, fg, long_seg, left, right, bg_cl, bg_lit, n = top_blocks
+    rel = np.zeros(seg.max() + 1, np.int64)
+    for s, k in fg.items():
+        rel[s] = k
+    idx = np.flatnonzero(np.isin(seg, list(fg)))
+    assert _split_overspread(c, seg, idx, rel, left, right, n) == []  # 1..39: it fits
+    top = max(fg.values())
+    end = [s for s, k in fg.items() if k > top - 6]
+    slipped = rel.copy()
+    slipped[end] += 3
+    blocks = _split_overspread(c, seg, idx, slipped, left, right, n)
+    assert len(blocks) >= 2 and sum(map(len, blocks)) <= len(idx)
+    main = set(seg[blocks[0]].tolist())
+    assert not main & set(end)  # the slipped end is not in the body's block
+    assert len(blocks[0]) > 0.7 * len(idx)
+    in_end = [np.isin(seg[b], end).mean() for b in blocks[1:]]
+    assert max(in_end) == 1.0  # ... but in blocks of its own
+    assert all(share in (0.0, 1.0) for share in in_end)
+
+
 def test_a_piece_seeded_off_the_middle_grows_to_both_ends_of_the_pattern(monkeypatch):
     """A piece is grown with provisional indices, its seed (the longest segment) at the middle one: held to
     the pattern's own indices, a surface lit by all 40 stripes seeded at stripe 12 lost stripes 32-39 (they
