@@ -148,7 +148,7 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
                   scenes: tuple[str, ...] = ("side", "top"), poses: int = 12, mesh: str | None = None,
                   fur: bool = True, board: Board | None = None, defects: dict[int, str] | None = None,
                   rig: Rig | None = None, light: dict | None = None, scene: dict | None = None,
-                  gamma: float = 1.0) -> Path:
+                  gamma: float = 1.0, mesh_length_mm: float = 600.0) -> Path:
     """Render a complete capture (calibration poses + animal views) with ground truth; returns ``out_dir``.
 
     defects : {pose number (1-based): "no_board" | "no_stripes"} renders deliberately unusable poses.
@@ -158,6 +158,7 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
               "coat", "platform", "rails", "camera_height", "camera_aimed", "camera_back").
     gamma   : the camera's display gamma: every image is written encoded with it (``display_encoded``: 2.2 as
               an sRGB camera or renderer writes), and rig.json and truth.json say so (``camera_gamma``)
+    mesh_length_mm : the longest horizontal extent ``mesh`` is scaled to (``animal.from_mesh``)
     """
     light = dict(light or {})
     stripe_ambient = light.pop("stripe_ambient", None)
@@ -198,7 +199,7 @@ def write_capture(out_dir: str | Path, stripes: int = 40, size: tuple[int, int] 
         truth["board_poses"].append({"name": name, "R": R.tolist(), "t": t.tolist(), "defect": defects.get(i)})
         st = stripe_truth(hits, stripe, rig, surfaces)
         np.savez_compressed(out / "truth" / f"{name}_stripes.npz", **st)  # type: ignore[arg-type]
-    animal = from_mesh(mesh) if mesh else quadruped(seed=seed)
+    animal = from_mesh(mesh, mesh_length_mm) if mesh else quadruped(seed=seed)
     for view in scenes:
         _write_view(out, view, animal, rig, rays_xy, fur, seed, rng, truth, light, scene or {}, write)
     (out / "truth" / "truth.json").write_text(json.dumps(truth, indent=1))
