@@ -289,3 +289,25 @@ def test_from_above_a_v_shaped_curve_is_read_at_its_bottom():
     flat = {**conflicts, 11: 0.0, 12: 0.0, 13: 0.0}
     open_beyond = {o: (0.0, 0.0) for o in flat}
     assert choose_offset(flat, open_beyond, from_above=True) is None and choose_offset(flat, open_beyond) is None
+
+
+def test_the_shadows_edge_settles_a_reading_that_stray_conflicts_left_one_stripe_high():
+    """At the plate's right offset the projector's ray just past its lit-side edge lands on lit wall beside
+    the shadow; one stripe higher, the next stripe out is one the plate intercepts. When stray centres leave
+    the conflict curve as high at the right offset as one stripe above it (a head grown onto a body one
+    stripe off), the ramp reading takes the higher one; the shadow's edge brings it back, and stops at a
+    real ramp step."""
+    from measurement.offsets import _edge_settled, edge_adjacency, lit_cells
+
+    planes, rays, cl, idx, true = _scene(-60.0, 60.0)
+    k_min = int(true[idx].min())
+    r = np.zeros(len(rays), np.int64)
+    r[idx] = true[idx] - k_min
+    lit = lit_cells(rays, planes, cl, np.flatnonzero(cl >= 0))
+    at = {o: edge_adjacency(rays, planes, r, idx, N, lit, o) for o in (k_min - 1, k_min, k_min + 1)}
+    assert at[k_min] > 0.9 and at[k_min + 1] < 0.1
+    flat = {k_min - 2: 0.2, k_min - 1: 0.1, k_min: 0.004, k_min + 1: 0.004, k_min + 2: 0.0, k_min + 3: 0.0}
+    assert _edge_settled(rays, planes, r, idx, N, lit, flat, k_min + 1, True, 0.002) == k_min
+    assert _edge_settled(rays, planes, r, idx, N, lit, flat, k_min, True, 0.002) == k_min  # the ramp stops it
+    rising = {**flat, k_min: 0.01}  # the right offset conflicts more: no evidence to move on
+    assert _edge_settled(rays, planes, r, idx, N, lit, rising, k_min + 1, True, 0.002) == k_min + 1
