@@ -265,8 +265,9 @@ def _edge_settled(rays, planes, r, idx, n: int, lit: np.ndarray, conflicts: dict
     """The ramp reading ``off`` moved toward the conflicts while a step there adds no conflicts and gains
     ``EDGE_DROP`` of the edge bins beside lit background (``edge_adjacency``): the reading's residue
     tolerance is blind where stray centres conflict as much at the right offset as one stripe away from it
-    (cow-like shapes seen from the side, a head grown onto the body a stripe off: 0.9 and 0.9 per mille,
-    7.6 and 7.9), but the shadow's edge is not. It stops at the first real ramp step."""
+    (large cow-like shapes seen from the side, overflowing the pattern, a head grown onto the body a stripe
+    off: 0.9 and 0.9 per mille, 7.6 and 7.9), but the shadow's edge is not. It stops at the first real ramp
+    step."""
     toward = -1 if projector_right else 1
     a = None  # (read only where a step is free: on most views the first one toward the conflicts is not)
     while off + toward in conflicts and conflicts[off + toward] <= conflicts[off]:
