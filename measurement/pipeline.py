@@ -229,6 +229,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
                            else frame_edges(animal_uv, image.shape[:2]))
     # the stripes' median width at half height, against the width the detector's windows were set for
     meas["stripe_width_px"] = round(centres.median_width, 1) if len(centres) else None
+    meas["pattern_edges"] = pattern_edges(animal_stripe, calibration.stripes, params.body.min_group)
     meas["warnings"] = _warnings(meas, labels, stripe_width_ratio(centres, image.shape[1]) if len(centres) else None)
     return ScanResult(animal_pts, animal_stripe, animal_uv, pts, stripe, uv, meas, timings)
 
@@ -286,6 +287,15 @@ def frame_edges(uv: np.ndarray, shape: tuple[int, int], margin: float = FRAME_MA
 
 
 SATURATED = 0.05  # share of the animal's points on saturated pixels from which a scan is warned about
+
+
+def pattern_edges(stripe: np.ndarray, n: int, min_group: int = 10) -> list[str]:
+    """Which of the pattern's outermost stripes ("first": index 0, "last": n - 1) light the animal: stripe indices
+    (K,) of its points, at least ``min_group`` of them on the stripe. There the animal may go on past the
+    light, unmeasured: the paper's length runs between its outermost stripe groups, so it then spans the
+    pattern's reach, not the animal (on the simulator's rig every view of the five-seed bench reaches one end or both)."""
+    counts = np.bincount(stripe, minlength=n) if len(stripe) else np.zeros(n, np.int64)
+    return [name for name, k in (("first", 0), ("last", n - 1)) if counts[k] >= min_group]
 
 
 def saturated_share(image: np.ndarray, uv: np.ndarray) -> float | None:

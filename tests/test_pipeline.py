@@ -355,6 +355,20 @@ def test_scans_in_several_threads_at_once_give_each_its_own_result(small_capture
         assert r.measurements["body_height_mm"] == own.measurements["body_height_mm"]
 
 
+def test_the_patterns_outermost_stripes_on_the_animal_are_named(small_capture, truth_cal):
+    """Where the pattern's first or last stripe lights the animal, the animal may go on past the light and the
+    length spans only the pattern's reach: ``pattern_edges`` names those ends, as the simulator's truth has them."""
+    from measurement.pipeline import pattern_edges
+
+    r = scan(read_image(small_capture / "scan" / "side.png"), truth_cal, "side")
+    t = dict(np.load(small_capture / "truth" / "side_stripes.npz"))
+    on = t["stripe"][t["kind"] == 5]
+    truth = [name for name, k in (("first", 0), ("last", truth_cal.stripes - 1)) if (on == k).sum() >= 10]
+    assert truth and r.measurements["pattern_edges"] == truth
+    assert pattern_edges(np.array([0] * 10 + [5] * 30 + [39] * 9), 40) == ["first"]
+    assert pattern_edges(np.zeros(0, np.int64), 40) == []
+
+
 def test_an_animal_cut_by_the_picture_edge_is_named_in_the_warnings(small_capture, truth_cal, tmp_path):
     """With the side camera 200 mm higher the feet reach the bottom of the picture: the scan names the
     edge and warns that the length and height may be short. The small capture's centred animal does not."""
