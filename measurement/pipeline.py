@@ -191,7 +191,7 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
         if len(eu):
             ep, keep = end_points(eu, ev, ek, ew, table, calibration.planes, labels.background,
                                   max(margin, FLOOR_STOP_MM), max(1, round(MERGE_ROWS * image.shape[0] / 2048)))
-            ends = (ep[keep], ek[keep], ew[keep])
+            ends = (ep[keep], ek[keep], ew[keep], ev[keep])
     wide = _wide_peaks(centres, labelled & ~ok & ~merged, labels, animal_stripe, animal_pts, smooth_u, cells, table,
                        calibration.planes, margin, params.body)
     if merged.any() and len(animal_pts):
