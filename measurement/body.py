@@ -324,24 +324,17 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
     # the cross-check and the length need only the points and their rows: beside the extents
     box = second_core().submit(_box, points)
     lp, ls, lr, lg = points, stripe, rows, groups
-    if wide is not None and len(wide[1]):
-        thin = ~np.isin(wide[1], groups)  # only stripes the cloud makes no group of
-        if thin.any():
-            lp = np.concatenate([points, wide[0][thin]])
-            ls, lr = np.concatenate([stripe, wide[1][thin]]), np.concatenate([rows, wide[2][thin]])
-            k2, c2 = _stripe_counts(ls)
-            lg = [int(k) for k, n in zip(k2, c2, strict=True) if n >= params.min_group]
+    if wide is not None and len(wide[1]):  # only stripes the cloud makes no group of
+        lp, ls, lr, lg = _thin_joined((lp, ls, lr, lg), wide[0], wide[1], wide[2], params.min_group)
+        if lg != groups:
             out["length_wide_groups"] = sorted(set(lg) - set(groups))
     if ends is not None and len(ends) > 3 and len(ends[1]):
         # the stripes' faint ends, with their rows, for stripes neither the cloud nor the wide peaks make a group
         # of (walked past a group's true end they run on in the blur's halo, and its rows would move the mean)
-        thin = ~np.isin(ends[1], lg)
-        if thin.any():
-            lp = np.concatenate([lp, ends[0][thin]])
-            ls, lr = np.concatenate([ls, ends[1][thin]]), np.concatenate([lr, ends[3][thin]])
-            k2, c2 = _stripe_counts(ls)
-            lg = [int(k) for k, n in zip(k2, c2, strict=True) if n >= params.min_group]
-            out["length_faint_groups"] = sorted(set(lg) - set(groups))
+        before = lg
+        lp, ls, lr, lg = _thin_joined((lp, ls, lr, lg), ends[0], ends[1], ends[3], params.min_group)
+        if lg != before:
+            out["length_faint_groups"] = sorted(set(lg) - set(before))
     length_job = second_core().submit(_length, lp, ls, lr, lg, params.min_group)
     # each group's points in their original order (one stable sort instead of a mask per group)
     order = _stable_order(stripe)
@@ -363,6 +356,20 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
         out["body_length"] = length
     out["oriented_box_mm"] = box.result()
     return out
+
+
+def _thin_joined(length_input: tuple, extra: np.ndarray, extra_stripe: np.ndarray, extra_rows: np.ndarray,
+                 min_group: int) -> tuple:
+    """The length's points (N, 3), stripes (N,), rows (N,) and groups with the ``extra`` points (E, 3), their
+    stripes (E,) and rows (E,) of stripes that are no group yet joined, and the groups counted again."""
+    lp, ls, lr, lg = length_input
+    thin = ~np.isin(extra_stripe, lg)
+    if not thin.any():
+        return length_input
+    lp = np.concatenate([lp, extra[thin]])
+    ls, lr = np.concatenate([ls, extra_stripe[thin]]), np.concatenate([lr, extra_rows[thin]])
+    k2, c2 = _stripe_counts(ls)
+    return lp, ls, lr, [int(k) for k, n in zip(k2, c2, strict=True) if n >= min_group]
 
 
 def _stable_order(stripe: np.ndarray) -> np.ndarray:
