@@ -3,13 +3,15 @@
     python bench/shapes.py [--size 1536x1024] [--cache /tmp/bodyscan-bench]
 
 The issue's figures will also be checked on other animals than the procedural quadruped. This builds
-large cow-like bodies from trimesh primitives (an ellipsoid body on four capsule legs, a neck raising the
-head above the back, two ears), scales them to 430-560 mm (so that, head and tail included, the stripe pattern spans them from the side and
-from above, as the rig is meant to be used: at 600 mm and more they overflow it), renders a side and a top view of each (fur or
-clean, 40 or 50 stripes) and reports per view, as ``bench/animals.py`` does, the share of the animal's true
-crossings labelled, the share of those right, and per piece the offset chosen against the true one. Unlike
-the shared meshes, it needs nothing outside the checkout. Added on 2026-12-04, after the labelling's last
-change, never used while developing it.
+cow-like bodies from trimesh primitives (an ellipsoid body on four upright capsule legs, a neck raising the
+head above the back, two ears), scales them to 430-560 mm (so that, head and tail included, the stripe
+pattern spans them from the side and from above, as the rig is meant to be used: at 600 mm and more they
+overflow it), renders a side and a top view of each (fur or clean, 40 or 50 stripes) and reports per view,
+as ``bench/animals.py`` does, the share of the animal's true crossings labelled, the share of those right,
+and per piece the offset chosen against the true one. Unlike the shared meshes, it needs nothing outside
+the checkout. Added on 2026-12-04; its first version (sideways legs, 600-900 mm) is where
+``offsets._edge_settled`` was found (docs/benchmarks.md). The render cache is keyed by name only: a change
+to ``cow`` needs a new ``PREFIX``.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from bench.common import cached_capture, print_pieces, summary  # noqa: E402
 
+PREFIX = "cows"  # of the cached renders and meshes
 # name, head raised (mm before scaling), body length the mesh is scaled to (mm), stripes, fur, seed
 SHAPES = (("cow-a", 170, 450, 40, True, 41), ("cow-b", 170, 520, 40, True, 42), ("cow-c", 250, 500, 40, True, 43),
           ("cow-d", 170, 480, 40, False, 44), ("cow-e", 300, 540, 40, True, 45), ("cow-f", 250, 460, 50, True, 46),
@@ -73,8 +76,8 @@ def main() -> None:
     print("render                    view  labelled  right    pieces (centres: chosen offset / true)")
     for name, raise_mm, length, stripes, fur, seed in SHAPES:
         label = f"{name}-{stripes}-{'fur' if fur else 'clean'}-{seed}"
-        out = Path(args.cache) / f"shape3-{size[0]}x{size[1]}-{label}"
-        mesh = Path(args.cache) / f"shape3-{name}-{raise_mm}.ply"
+        out = Path(args.cache) / f"{PREFIX}-{size[0]}x{size[1]}-{label}"
+        mesh = Path(args.cache) / f"{PREFIX}-{name}-{raise_mm}.ply"
         if not mesh.exists():
             mesh.parent.mkdir(parents=True, exist_ok=True)
             cow(raise_mm).export(mesh)

@@ -237,7 +237,7 @@ def edge_adjacency(rays, planes, r, idx, n: int, lit: np.ndarray, off: int, proj
     shadow, where the camera sees it lit: at the right offset most edge bins have it. One stripe away from
     the conflicts the piece's edge stripe is really that ray's neighbour inside the shadow, and the next one
     out is one the animal intercepts: the share falls (on the five seeds' and the shared meshes' views
-    0.50-0.96 at the right offset, 0.16-0.70 one further)."""
+    0.50-0.96 at the right offset, mostly 0.16-0.70 one further; one view keeps 0.96)."""
     sub = _thinned(idx)
     k = r[sub] + off
     ok = (k >= 0) & (k < n)
