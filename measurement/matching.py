@@ -443,7 +443,9 @@ def _near_ends(c, seg, animal: np.ndarray, segments: set[int], n: int) -> set[in
     for lo, hi in ((lab.min(), lab.min() + TIP_INSIDE), (lab.max() - TIP_INSIDE, lab.max())):
         u = c.u[at[(lab >= lo) & (lab <= hi)]]
         near |= (c.u >= float(u.min()) - reach) & (c.u <= float(u.max()) + reach)
-    return set(np.unique(seg[near])) & segments
+    touched = np.zeros(int(seg.max()) + 1, bool)
+    touched[seg[near]] = True  # (a mask, not np.unique: near holds most of a top view's centres)
+    return {s for s in segments if touched[s]}
 
 
 UNFLAT_K = 6.0  # a short background segment whose median distance off its plane is this many times the plane's noise

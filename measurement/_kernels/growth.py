@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .jit import compiled
+from .offsets import merge_distinct
 from .rays import _depth, _point
 from .segments import group_members
 
@@ -125,7 +126,7 @@ def _grow_rounds(rays, planes, table, cols, by_nb, by_own, newly, tol_mm, n, gap
         # only segments beside a newly labelled one can vote differently from the round before
         at = _voters(cols, table, newly, by_nb, by_own)
         if cover > 0 and len(pending):
-            at = np.unique(np.concatenate((at, _pairs_of(cols, table, pending, by_own))))
+            at = merge_distinct(at, _pairs_of(cols, table, pending, by_own))
         if len(at) == 0:
             break
         best = depth_votes(rays, planes, table, cols, at, gaps, tol_mm, n, penalty_mm, no_step)
@@ -467,8 +468,25 @@ def _pairs_of(cols, table, segs, by_own):
             if table[cols[4, p]] >= 0:
                 out[k] = p
                 k += 1
-    out = out[:k]
-    out.sort()
+    return _ascending(out[:k], cols.shape[1])
+
+
+@compiled
+def _ascending(values, size):
+    """Distinct integers ``values`` (K,) in [0, ``size``) in ascending order: sorted when few, read off a bitmap
+    of ``size`` when many (numba's sort took 2.9 ms on 50 000 pair positions, the bitmap of 140 000 0.1 ms)."""
+    if len(values) * 16 <= size:
+        values.sort()
+        return values
+    mark = np.zeros(size, np.bool_)
+    for v in values:
+        mark[v] = True
+    out = np.empty(len(values), np.int64)
+    k = 0
+    for p in range(size):
+        if mark[p]:
+            out[k] = p
+            k += 1
     return out
 
 
