@@ -1458,6 +1458,7 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
     at_lab = animal[at]
     bg_at = np.flatnonzero((labelled_all >= 0) & (animal < 0))
     bg_lab = labelled_all[bg_at]
+    animal_of, bg_of = _by_label(at, at_lab), _by_label(bg_at, bg_lab)  # label -> its centres, ascending
     free_sorted = by_segment[free_all[by_segment]]
     free_u, free_seg = c.u[free_sorted], seg[free_sorted]
     first, last = int(at_lab.min()), int(at_lab.max())
@@ -1469,7 +1470,7 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
     ends = [(first + d, first + d - 1) for d in range(TIP_INSIDE, -1, -1)]
     ends += [(last - d, last - d + 1) for d in range(TIP_INSIDE, -1, -1)]
     for end, k in ends:
-        mine = at[at_lab == end]
+        mine = animal_of(end)
         if not 0 <= k < n or len(mine) == 0:
             continue
         # only segments within a few stripe periods of the end stripe's columns can be its neighbours (whole)
@@ -1493,7 +1494,7 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
         beside = end_u[rows_f]
         wrong_side = np.where(np.isnan(beside), False, (c.u[free] > beside) if k < end else (c.u[free] < beside))
         taken = np.zeros(height, bool)
-        taken[c.v[at[at_lab == k]]] = True
+        taken[c.v[animal_of(k)]] = True
         # past a tip there is floor or nothing: an unlabelled stripe beyond it means more of the animal
         outer = left if k < end else right
         out_nb = outer[free]
@@ -1514,13 +1515,13 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
         # past clean end stripes too, side views gained wrong labels and lost points within 2 mm)
         inner = share[:, 4] > TIP_INNER
         if from_above and inner.any():
-            inner &= _split_end(c, mine, at[at_lab == (end + 1 if k < end else end - 1)], height)
+            inner &= _split_end(c, mine, animal_of(end + 1 if k < end else end - 1), height)
         if not ok.any():
             continue
         # the floor's stripe k may share a few rows with a raised tip (where it leaves the tip's shadow), but
         # a floor stripe read one index off shares most of its rows with the floor's k
         on_floor = np.zeros(height, bool)
-        on_floor[c.v[bg_at[bg_lab == k]]] = True
+        on_floor[c.v[bg_of(k)]] = True
         ok &= _kernels.group_counts(on_floor[rows_f][:, None], bounds)[:, 0] / count <= TIP_FLOOR_ROWS
         if not ok.any():
             continue
@@ -1533,11 +1534,12 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
         # (a median under the limit needs half the points under it: the others are not weighed)
         half = _kernels.group_counts((dist <= TIP_NEAR * spacing_mm)[:, None], bounds)[:, 0] / count >= 0.5
         found = []
-        for i in sel[half[sel]]:
+        cand = sel[half[sel]]
+        medians = _kernels.group_medians(dist[spans(starts[cand], count[cand])], count[cand]) if len(cand) else []
+        for i, near_mm in zip(cand, medians, strict=True):
             a, b = int(starts[i]), int(starts[i] + count[i])
-            near_mm = float(np.median(dist[a:b]))
             if near_mm <= TIP_NEAR * spacing_mm:
-                found.append((near_mm, a, b, bool(inner[i])))
+                found.append((float(near_mm), a, b, bool(inner[i])))
         claimed = np.zeros(height, bool)
         for _, a, b, is_inner in sorted(found):  # nearest first: one segment per row takes k
             if claimed[rows_f[a:b]].any():
@@ -1548,6 +1550,17 @@ def _tips_once(c, rays, planes, seg, labelled_all: np.ndarray, is_bg: np.ndarray
             if not is_inner and int(seg[free[a]]) not in out:
                 out[int(seg[free[a]])] = k
     return out
+
+
+def _by_label(idx: np.ndarray, lab: np.ndarray) -> Callable[[int], np.ndarray]:
+    """A function: label -> ``idx[lab == label]`` (ascending as in ``idx``), from one stable sort of ``lab`` (K,)
+    instead of a pass over them per label."""
+    order = np.argsort(lab, kind="stable")
+    by, keys = idx[order], lab[order]
+
+    def of(k: int) -> np.ndarray:
+        return by[np.searchsorted(keys, k):np.searchsorted(keys, k, side="right")]
+    return of
 
 
 SPLIT_END = 0.5  # an end stripe closer to the stripe inside it than this share of their median distance, in some row
