@@ -293,7 +293,8 @@ def _quantiles(x: np.ndarray, qs: tuple[float, ...]) -> list[float]:
 
 def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
             params: BodyParams = BodyParams(), ends: tuple[np.ndarray, ...] | None = None,
-            wide: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> dict:
+            wide: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+            past_ends: tuple[np.ndarray, np.ndarray] | None = None) -> dict:
     """Automatic measurements of an isolated animal cloud.
 
     points (N, 3) mm, stripe (N,) index, rows (N,) image row of each point.
@@ -312,6 +313,11 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
            positions are off by 1-3 px, mostly in depth along the stripe's plane, which barely moves a
            distance between the body's two ends; the groups the cloud makes are left as they are (more rows
            there would move the length's 10-row rule).
+    past_ends : points (X, 3) mm and stripe indices (X,) of such left-out centres that lie beyond their stripe's
+           first or last row in the cloud: the per-stripe extents read them as they read the faint ends (each
+           point a walk of its own, so within ``ENDS_STEP_MM`` of the group's trimmed extremes); the length and
+           the groups do not. The pipeline passes them from above, where a stripe crossing the flank at grazing
+           incidence ends in wide or one-sided peaks and the body's width ran 1-3 % short.
     """
     out: dict = {"view": view, "point_count": int(len(points))}
     ks, counts = _stripe_counts(stripe)
@@ -342,8 +348,9 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
     first, last = np.searchsorted(ks_sorted, ks_arr), np.searchsorted(ks_sorted, ks_arr, side="right")
     grouped = np.asarray(points[order], np.float64)
     exts, all_ends = _extents(grouped, first, last, params.trim)
-    if ends is not None and len(ends[1]):
-        out["faint_end_points"] = _with_ends(grouped, first, last, ks_arr, ends, params.trim, exts, all_ends)
+    ext_ends = _ends_and_past(ends, past_ends)
+    if ext_ends is not None:
+        out["faint_end_points"] = _with_ends(grouped, first, last, ks_arr, ext_ends, params.trim, exts, all_ends)
     best = max(range(len(groups)), key=lambda g: exts[g])  # the first of equals, as max() of the groups
     ext, extremes, k_best = float(exts[best]), all_ends[best], groups[best]
     name = "body_width" if view == "top" else "body_height"
@@ -356,6 +363,21 @@ def measure(points: np.ndarray, stripe: np.ndarray, rows: np.ndarray, view: str,
         out["body_length"] = length
     out["oriented_box_mm"] = box.result()
     return out
+
+
+def _ends_and_past(ends: tuple[np.ndarray, ...] | None, past: tuple[np.ndarray, np.ndarray] | None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The faint ends' points, stripes and walks (``measure``'s ``ends``) with the ``past_ends`` points and stripes
+    joined, each of those a walk of its own; None when there are neither."""
+    has_ends = ends is not None and len(ends[1]) > 0
+    if past is None or len(past[1]) == 0:
+        return (ends[0], ends[1], ends[2]) if has_ends else None
+    base = int(ends[2].max()) + 1 if has_ends else 0
+    walks = base + np.arange(len(past[1]), dtype=np.int64)
+    if not has_ends:
+        return past[0], past[1], walks
+    return (np.concatenate([ends[0], past[0]]), np.concatenate([ends[1], past[1]]),
+            np.concatenate([ends[2], walks]))
 
 
 def _thin_joined(length_input: tuple, extra: np.ndarray, extra_stripe: np.ndarray, extra_rows: np.ndarray,

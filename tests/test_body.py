@@ -316,6 +316,27 @@ def test_faint_ends_change_the_extents_only():
     assert ended["stripes_detected"] == plain["stripes_detected"]
 
 
+def test_left_out_peaks_past_a_stripes_rows_extend_the_extents_only():
+    pts, stripe, rows = _barrel(rows=240)
+    keep = np.abs(pts[:, 1]) < 94  # every stripe loses its last rows at both ends, as at a grazing flank
+    plain = measure(pts[keep], stripe[keep], rows[keep], "top")
+    lost = np.flatnonzero(~keep & (stripe == 7))
+    past = measure(pts[keep], stripe[keep], rows[keep], "top", past_ends=(pts[lost], stripe[lost]))
+    # (each point counts within ENDS_STEP_MM of the group's trimmed extremes: here all of them)
+    assert past["body_height_mm"] > plain["body_height_mm"] + 8.0 and past["body_width"]["stripe"] == 7
+    assert past["faint_end_points"] == len(lost)
+    assert past["body_length_mm"] == plain["body_length_mm"] and past["stripes_detected"] == plain["stripes_detected"]
+    # with faint ends as well, each left-out point is a walk of its own beside theirs
+    up = np.flatnonzero(~keep & (stripe == 7) & (pts[:, 1] > 0))
+    both = measure(pts[keep], stripe[keep], rows[keep], "top", ends=(pts[up], stripe[up], np.zeros(len(up), np.int64)),
+                   past_ends=(pts[lost], stripe[lost]))
+    assert both["faint_end_points"] == len(up) + len(lost) and abs(both["body_height_mm"] - past["body_height_mm"]) < 0.1
+    # a speck far past the stripe's end (beyond its fences) moves nothing
+    speck = np.array([[0.0, 400.0, 1200.0]])
+    far = measure(pts[keep], stripe[keep], rows[keep], "top", past_ends=(speck, np.array([7])))
+    assert far["body_height_mm"] == plain["body_height_mm"]
+
+
 def test_compiled_extents_with_faint_ends_equal_the_numpy_ones():
     from measurement import _kernels
     from measurement.body import ENDS_STEP_MM, _extent_with
