@@ -369,12 +369,13 @@ def _ends_and_past(ends: tuple[np.ndarray, ...] | None, past: tuple[np.ndarray, 
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """The faint ends' points, stripes and walks (``measure``'s ``ends``) with the ``past_ends`` points and stripes
     joined, each of those a walk of its own; None when there are neither."""
-    has_ends = ends is not None and len(ends[1]) > 0
+    if ends is not None and len(ends[1]) == 0:
+        ends = None
     if past is None or len(past[1]) == 0:
-        return (ends[0], ends[1], ends[2]) if has_ends else None
-    base = int(ends[2].max()) + 1 if has_ends else 0
+        return (ends[0], ends[1], ends[2]) if ends is not None else None
+    base = int(ends[2].max()) + 1 if ends is not None else 0
     walks = base + np.arange(len(past[1]), dtype=np.int64)
-    if not has_ends:
+    if ends is None:
         return past[0], past[1], walks
     return (np.concatenate([ends[0], past[0]]), np.concatenate([ends[1], past[1]]),
             np.concatenate([ends[2], walks]))
