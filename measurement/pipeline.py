@@ -192,13 +192,11 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
             ep, keep = end_points(eu, ev, ek, ew, table, calibration.planes, labels.background,
                                   max(margin, FLOOR_STOP_MM), max(1, round(MERGE_ROWS * image.shape[0] / 2048)))
             ends = (ep[keep], ek[keep], ew[keep], ev[keep])
-    left_out = _left_out(centres, labelled & ~ok & ~merged, labels, animal_pts, smooth_u, cells, table,
-                         calibration.planes, margin, params.body)
-    wide = _of_thin_stripes(left_out, animal_stripe, len(calibration.planes), params.body.min_group)
+    wide, past = _left_out(centres, labelled & ~ok & ~merged, labels, animal_pts, animal_stripe, rows.take(on),
+                           smooth_u, cells, table, calibration.planes, margin, params.body, past=view == "top")
     if merged.any() and len(animal_pts):
         wide = _with_merged(wide, np.flatnonzero(merged), centres, labels, smooth_u, cells, table, calibration.planes,
                             margin)
-    past = _past_ends(left_out, animal_stripe, rows.take(on), len(calibration.planes)) if view == "top" else None
     meas = measure(animal_pts, animal_stripe, rows.take(on), view, params.body, ends, wide, past)
     # a stripe profile narrower than the optics make it on the animal is cut by an outline: its centroid is off
     # by a pixel or two, which a body's extremes hundreds of mm apart barely feel (the measurement reads them as
@@ -236,50 +234,52 @@ def _scan(image: np.ndarray, calibration: Calibration, view: str, ambient: np.nd
     return ScanResult(animal_pts, animal_stripe, animal_uv, pts, stripe, uv, meas, timings)
 
 
-def _left_out(centres, unreliable: np.ndarray, labels: Labels, animal_pts: np.ndarray, smooth_u: np.ndarray, cells,
-              table, planes: np.ndarray, margin: float, body: BodyParams
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """The points (W, 3) mm, stripes (W,) and rows (W,) of the labelled centres the cloud left out,
-    ``unreliable`` (M,) (``detection.reliable``, or off the median along their stripe), that belong to the
-    animal (``body.beside`` its cloud ``animal_pts``); None where there are none."""
+def _left_out(centres, unreliable: np.ndarray, labels: Labels, animal_pts: np.ndarray, animal_stripe: np.ndarray,
+              animal_rows: np.ndarray, smooth_u: np.ndarray, cells, table, planes: np.ndarray, margin: float,
+              body: BodyParams, past: bool = False
+              ) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray] | None, tuple[np.ndarray, np.ndarray] | None]:
+    """Of the labelled centres the cloud left out, ``unreliable`` (M,) (``detection.reliable``, or off the median
+    along their stripe), those that belong to the animal (``body.beside`` its cloud ``animal_pts``, stripes
+    ``animal_stripe`` (N,), rows ``animal_rows`` (N,)): the points (W, 3) mm, stripes (W,) and rows (W,) of
+    the stripes the cloud makes no group of (``measure``'s ``wide``), and with ``past`` the points (X, 3) mm and
+    stripes (X,) of those beyond their stripe's rows in the cloud (``measure``'s ``past_ends``); None where
+    there are none."""
     if len(animal_pts) == 0:
-        return None
+        return None, None
     xi = np.flatnonzero(unreliable)
     if len(xi) == 0:
-        return None
+        return None, None
+    thin, beyond = _thin_and_past(labels.stripe[xi], centres.v[xi], animal_stripe, animal_rows, len(planes),
+                                  body.min_group, past)
+    xi, thin, beyond = xi[thin | beyond], thin[thin | beyond], beyond[thin | beyond]
+    if len(xi) == 0:
+        return None, None
     xp = cloud_points(smooth_u, centres.u, centres.v, xi, labels.stripe, cells, table, planes)
-    on = beside(animal_pts, xp, labels.background, margin, body.cluster_mm)
-    return xp[on], labels.stripe[xi][on], centres.v[xi][on].astype(np.int64)
+    on = beside(animal_pts, xp, labels.background, margin, body.cluster_mm)  # (point by point)
+    ks, vs = labels.stripe[xi], centres.v[xi].astype(np.int64)
+    a, b = thin & on, beyond & on
+    return ((xp[a], ks[a], vs[a]) if thin.any() else None), ((xp[b], ks[b]) if b.any() else None)
 
 
-def _of_thin_stripes(left_out: tuple[np.ndarray, np.ndarray, np.ndarray] | None, animal_stripe: np.ndarray, n: int,
-                     min_group: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
-    """Of the ``left_out`` points, stripes and rows, those of the stripes the cloud (``animal_stripe`` (N,))
-    holds fewer than ``min_group`` points of (``measure``'s ``wide``); None where there are none."""
-    if left_out is None:
-        return None
-    counts = np.bincount(animal_stripe, minlength=n)
-    thin = counts[left_out[1]] < min_group
-    return tuple(a[thin] for a in left_out) if thin.any() else None  # type: ignore[return-value]
+def _thin_and_past(stripe: np.ndarray, rows: np.ndarray, animal_stripe: np.ndarray, animal_rows: np.ndarray, n: int,
+                   min_group: int, past: bool) -> tuple[np.ndarray, np.ndarray]:
+    """For left-out centres of stripes ``stripe`` (X,) in ``rows`` (X,): whether their stripe is one the cloud
+    (stripes ``animal_stripe`` (N,), rows ``animal_rows`` (N,)) holds fewer than ``min_group`` points of, and
+    (with ``past``) whether they lie beyond their stripe's first or last row in the cloud.
 
-
-def _past_ends(left_out: tuple[np.ndarray, np.ndarray, np.ndarray] | None, animal_stripe: np.ndarray,
-               animal_rows: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray] | None:
-    """Of the ``left_out`` points, stripes and rows, the points and stripes beyond their stripe's first or last
-    row in the cloud (stripes ``animal_stripe`` (N,), rows ``animal_rows`` (N,)): ``measure``'s ``past_ends``.
     Seen from above, the widest stripe crosses the flanks at grazing incidence and its last rows are wide or
-    one-sided peaks, 1-3 px off (kept out of the cloud); the width without them ran 1-3 % short (the five
-    seeds' top views, the truth's extremes lying there). Those inside the cloud's rows are left out: read
-    too, they moved the extents' trim inward (1536 px renders' widths 0.3 points shorter)."""
-    if left_out is None or len(animal_stripe) == 0:
-        return None
-    pts, ks, vs = left_out
+    one-sided peaks, 1-3 px off (kept out of the cloud); the width without them ran 1-3 % short on the five
+    seeds' top views, the truth's extremes lying there. Those inside the cloud's rows are not read: read too,
+    they moved the extents' trim inward (1536 px renders' widths up to 0.8 points shorter)."""
+    counts = np.bincount(animal_stripe, minlength=n)
+    thin = counts[stripe] < min_group
+    if not past or len(animal_stripe) == 0:
+        return thin, np.zeros(len(stripe), bool)
     lo = np.full(n, np.iinfo(np.int64).max)
     hi = np.full(n, -1, np.int64)
     np.minimum.at(lo, animal_stripe, animal_rows)
     np.maximum.at(hi, animal_stripe, animal_rows)
-    past = (vs < lo[ks]) | (vs > hi[ks])
-    return (pts[past], ks[past]) if past.any() else None
+    return thin, (rows < lo[stripe]) | (rows > hi[stripe])
 
 
 def _with_merged(wide: tuple[np.ndarray, np.ndarray, np.ndarray] | None, xi: np.ndarray, centres, labels: Labels,

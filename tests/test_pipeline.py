@@ -776,17 +776,15 @@ def test_a_tail_tips_centres_merged_with_a_floor_stripe_feed_the_length_off_the_
 
 
 def test_only_left_out_peaks_past_their_stripes_rows_in_the_cloud_reach_the_extents():
-    from measurement.pipeline import _of_thin_stripes, _past_ends
+    from measurement.pipeline import _thin_and_past
 
     animal_stripe = np.array([2, 2, 2, 5, 5] + [3] * 12)
     animal_rows = np.array([10, 11, 12, 40, 41] + list(range(100, 112)))
-    pts = np.arange(18.0).reshape(6, 3)
-    left_out = (pts, np.array([2, 2, 2, 5, 3, 4]), np.array([9, 11, 13, 39, 105, 7]))
-    past = _past_ends(left_out, animal_stripe, animal_rows, 6)
+    stripe, rows = np.array([2, 2, 2, 5, 3, 4]), np.array([9, 11, 13, 39, 105, 7])
+    thin, past = _thin_and_past(stripe, rows, animal_stripe, animal_rows, 6, 10, True)
     # rows 9 and 13 lie past stripe 2's rows 10-12, row 39 before stripe 5's; row 11 and 105 inside; stripe 4
-    # has no cloud rows, so its point lies past them
-    assert np.array_equal(past[1], [2, 2, 5, 4]) and np.array_equal(past[0], pts[[0, 2, 3, 5]])
-    assert _past_ends(None, animal_stripe, animal_rows, 6) is None
+    # has no cloud rows, so its centre lies past them
+    assert past.tolist() == [True, False, True, True, False, True]
     # the length's wide peaks are those of the stripes the cloud makes no group of (under 10 points)
-    thin = _of_thin_stripes(left_out, animal_stripe, 6, 10)
-    assert np.array_equal(thin[1], [2, 2, 2, 5, 4])
+    assert thin.tolist() == [True, True, True, True, False, True]
+    assert not _thin_and_past(stripe, rows, animal_stripe, animal_rows, 6, 10, False)[1].any()
