@@ -12,6 +12,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from . import _kernels
 from .background import near_planes
 from .body import BodyParams, beside, isolate_with_margin, measure
 from .calibration import Calibration
@@ -277,8 +278,11 @@ def _thin_and_past(stripe: np.ndarray, rows: np.ndarray, animal_stripe: np.ndarr
         return thin, np.zeros(len(stripe), bool)
     lo = np.full(n, np.iinfo(np.int64).max)
     hi = np.full(n, -1, np.int64)
-    np.minimum.at(lo, animal_stripe, animal_rows)
-    np.maximum.at(hi, animal_stripe, animal_rows)
+    order = _kernels.stable_group_order(animal_stripe.astype(np.int64, copy=False), n)  # (np.minimum.at: 0.4 ms)
+    ks, vs = animal_stripe[order], animal_rows[order].astype(np.int64, copy=False)
+    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
+    lo[ks[starts]] = np.minimum.reduceat(vs, starts)
+    hi[ks[starts]] = np.maximum.reduceat(vs, starts)
     return thin, (rows < lo[stripe]) | (rows > hi[stripe])
 
 
