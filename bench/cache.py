@@ -3,6 +3,8 @@
     python bench/cache.py dump OUT.json [--cache /tmp/bodyscan-bench] [--surface]
     python bench/cache.py compare BEFORE.json AFTER.json [--view top]
     python bench/cache.py variants [--cache /tmp/bodyscan-bench] [--out /tmp/bodyscan-variants]
+    python bench/cache.py hashes OUT.json [--cache /tmp/bodyscan-bench]
+    python bench/cache.py identical BEFORE.json AFTER.json
 
 The other benches render their views into the cache (``/tmp/bodyscan-bench`` by default) once; ``dump`` scans
 each of them with the checkout's code (the five-seed bench's, the robustness benches' at both sizes: 272 views
@@ -26,11 +28,17 @@ Gaussian blur of 0.6 and of 1.2 px on top of the simulator's optics, as ``bench/
 truth is the render's own, linked), and the five seeds' configurations rendered at 1536 px (120 views, about
 2 minutes); ``dump --cache`` that directory to score them. On 2026-12-02 these showed what the benches had not: a
 hind leg and tail left unlabelled from the side at 1536 px, and under the blur (length -26 %).
+
+``hashes`` writes per cached view a SHA-256 of its scan's points, stripes and pixels (the cloud and the scene) and of
+its measurements (a view the scan refuses: its error), half a minute on this host; ``identical`` prints how many views
+two such files disagree on, and which. A speed change is said to move nothing only when ``identical`` finds none
+(hash with each checkout's own copy, as for ``dump``).
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import sys
 import time
@@ -202,6 +210,42 @@ def _accuracy(name: str, keys: list[str], a: dict, b: dict) -> str:
     return f"  {name}s of the {len(e[0])} views placed before, against the truth's: " + ", ".join(parts)
 
 
+def digest(result) -> str:
+    """SHA-256 of a ``ScanResult``'s arrays and its measurements (JSON, keys sorted)."""
+    h = hashlib.sha256()
+    for a in (result.points, result.stripe, result.uv, result.scene_points, result.scene_stripe, result.scene_uv):
+        h.update(np.ascontiguousarray(a).tobytes())
+    h.update(json.dumps(result.measurements, sort_keys=True, default=str).encode())
+    return h.hexdigest()
+
+
+def hashes(cache: Path, out: Path) -> None:
+    """``digest`` of every cached view's scan into ``out`` (JSON: capture/view -> hash or error)."""
+    found: dict[str, str] = {}
+    for cap in sorted(c for c in cache.iterdir() if (c / "scan").is_dir() and (c / "truth" / "truth.json").exists()):
+        cal = load_calibration(cap / "truth" / "truth.json")
+        for view in ("side", "top"):
+            frame = cap / "scan" / f"{view}.png"
+            if frame.exists():
+                try:
+                    found[f"{cap.name}/{view}"] = digest(scan(read_image(frame), cal, view))
+                except MeasurementError as e:
+                    found[f"{cap.name}/{view}"] = f"error: {e}"
+    out.write_text(json.dumps(found, indent=0))
+    print(f"{len(found)} views hashed into {out}")
+
+
+def identical(before: Path, after: Path) -> None:
+    """How many views two ``hashes`` files disagree on, by view, and which."""
+    a, b = json.loads(before.read_text()), json.loads(after.read_text())
+    differ = [k for k in sorted(set(a) & set(b)) if a[k] != b[k]]
+    by_view = {v: sum(k.endswith("/" + v) for k in differ) for v in ("side", "top")}
+    print(f"{len(differ)} of {len(set(a) & set(b))} views differ (side {by_view['side']}, top {by_view['top']}); "
+          f"{len(set(a) ^ set(b))} in one file only")
+    for k in differ:
+        print("  " + k)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -216,11 +260,21 @@ def main() -> None:
     c.add_argument("before", type=Path)
     c.add_argument("after", type=Path)
     c.add_argument("--view", choices=("side", "top", "front", "back"))
+    h = sub.add_parser("hashes")
+    h.add_argument("out", type=Path)
+    h.add_argument("--cache", type=Path, default=Path("/tmp/bodyscan-bench"))
+    i = sub.add_parser("identical")
+    i.add_argument("before", type=Path)
+    i.add_argument("after", type=Path)
     args = ap.parse_args()
     if args.cmd == "dump":
         dump(args.cache, args.out, args.surface)
     elif args.cmd == "variants":
         variants(args.cache, args.out)
+    elif args.cmd == "hashes":
+        hashes(args.cache, args.out)
+    elif args.cmd == "identical":
+        identical(args.before, args.after)
     else:
         compare(args.before, args.after, args.view)
 
