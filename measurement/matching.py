@@ -733,11 +733,12 @@ def _regrown(grower: _Grower, rays, planes, seg, n, seed: int, at: int, off: int
     Read again from the side as well, the offset refused the blurred views' growth; not read again from
     above or with one background plane, a rig 200 mm higher (no floor found) took 2293 floor centres into
     its piece and a top view from 150 mm lower grew slipped labels, both then placed wrong."""
-    own = np.unique(seg[idx])
+    sizes = np.bincount(seg[idx], minlength=seg.max() + 1)
+    own = np.flatnonzero(sizes)  # (np.unique(seg[idx]), from the counts the check below needs anyway)
     free = grower.free.copy()
     if bg_planes is not None:  # not over the floor and wall: growth at the true index runs on down the legs
         like = background_like(rays, planes, seg, free[seg] & grower.long_seg, bg_planes, set(own.tolist()))
-        free[np.unique(seg[like])] = False
+        free[seg[like]] = False
     free[seed] = True
     idx2, trial2 = grower.regrown(seed, at, free)
     if len(idx2) < (1 + REGROW_GAIN) * len(idx):
@@ -747,7 +748,6 @@ def _regrown(grower: _Grower, rays, planes, seg, n, seed: int, at: int, off: int
     # loses or relabels what the first reading held is no better grown), and what it adds must not lie
     # behind the floor or wall (a wall's stripes taken one index off past a sitting animal's ears)
     had = np.isin(own, np.fromiter(trial2, np.int64))
-    sizes = np.bincount(seg[idx], minlength=seg.max() + 1)
     same = np.array([trial2.get(int(s), -10**6) - off for s in own[had]]) == rel_first[own[had]]
     if sizes[own[had][same]].sum() < REGROW_KEEP * len(idx):
         return None
@@ -1134,7 +1134,9 @@ def _part_shifts(c, rays, planes, seg, fg: dict[int, int], long_seg, left, right
     if len(idx) < 2 * PART_MIN:
         return fg
     block = _blocks(c, seg, lab, left, right).take(seg.take(idx))
-    ids, counts = np.unique(block, return_counts=True)
+    counts = np.bincount(block)  # (np.unique(block, return_counts=True) by counting: the same ids and counts)
+    ids = np.flatnonzero(counts)
+    counts = counts[ids]
     order = np.argsort(-counts)
     if counts[order[0]] < PART_MAIN * len(idx):
         return fg
