@@ -378,6 +378,11 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     ok = labels >= 0
     at = np.flatnonzero(ok)
     labels[at[~depth_in_range(rays.take(at, axis=0), planes, labels[at], *params.depth_range_mm)]] = -1
+    if SETTLE_ROUNDS:
+        fixed = segment_mask(seg, bg_labels)[seg]  # the floor's and wall's labels stay, and a tail tip's
+        if tips:
+            fixed |= tip
+        labels = _settle_equal_neighbours(c, rays, planes, seg, labels, order, params.depth_range_mm, fixed)
     if tips:  # a tail tip raised over the floor may lie beyond the floor's next stripe: held to the animal's
         labels = np.where(tip, _enforce_row_order(c, np.where(is_bg[seg], -1, labels), order),
                           _enforce_row_order(c, np.where(tip, -1, labels), order))
@@ -1984,6 +1989,87 @@ def _majority(voter: np.ndarray, vote: np.ndarray, n: int, min_share: float) -> 
     [0, n), -1 for a voter that found no label (it still counts as support)."""
     segs, labs = _kernels.majority(voter, vote, n, min_share)
     return dict(zip(segs.tolist(), labs.tolist(), strict=True))
+
+
+SETTLE_ROUNDS = 3  # rounds of ``_settle_equal_neighbours`` (a moved segment can free the next)
+SETTLE_ROWS = 3  # rows at least in which two segments' row neighbours carry one label, for one of them to move
+
+
+def _settle_equal_neighbours(c: Centres, rays, planes, seg: np.ndarray, labels: np.ndarray, order: np.ndarray,
+                             zrange: tuple[float, float], fixed: np.ndarray) -> np.ndarray:
+    """Labels (M,) with segments moved one stripe where their row neighbours in another segment carry the same
+    label in at least ``SETTLE_ROWS`` rows: one of the two is a stripe off, and the row order
+    (``_enforce_row_order``) would drop both. The smaller (fewer labelled centres) moves away from the
+    other, the right one up, the left one down, where that leaves each of its row neighbours in order and its
+    points in the working range ``zrange``; else the larger, on the same terms; else neither. ``fixed`` (M,):
+    centres that never move (the background's, a tail tip's). ``order`` : ``row_order(c)``.
+
+    Seen from above, at a flank behind a depth step the body's stripes k + 1 and k + 2 break off the long
+    stripes into short segments that depth continuity carries one low, onto the body's k and k + 1 (a 30 mm
+    step read as none); the body's own k, continuing down the flank, then meets the short k in the same
+    rows. The five seeds' 50-stripe clean top view of seed 9: 99.14 -> 99.49 % of the animal right, 98.78 ->
+    99.27 % within 2 mm."""
+    out = labels.copy()
+    v = c.v
+    n_seg = int(seg.max()) + 1
+
+    def grouped(keys: np.ndarray, values: np.ndarray) -> Callable[[int], np.ndarray]:
+        # key -> its values (in their order), from one sort (a pass over all of them per key cost 6 ms a top view)
+        srt = np.argsort(keys, kind="stable")
+        by, ks = values[srt], keys[srt]
+        return lambda k: by[np.searchsorted(ks, k):np.searchsorted(ks, k, side="right")]
+
+    # the row pairs of consecutive labelled centres, and which centres are labelled, stay: a move changes labels only
+    lo = order[out[order] >= 0]
+    a, b = lo[:-1], lo[1:]
+    same = v[a] == v[b]
+    a, b = a[same], b[same]
+    sa, sb = seg[a], seg[b]
+    movable = (sa != sb) & ~fixed[a] & ~fixed[b]
+    labelled = np.flatnonzero(out >= 0)
+    seg_l = seg[labelled]
+    size = np.bincount(seg_l, minlength=n_seg)
+    for _ in range(SETTLE_ROUNDS):
+        eq = movable & (out[a] == out[b])
+        if not eq.any():
+            break
+        key = sa[eq] * n_seg + sb[eq]
+        pairs, first_of, rows = np.unique(key, return_index=True, return_counts=True)
+        # only the segments of those pairs can move: their centres and row pairs, grouped
+        cand = np.zeros(n_seg, bool)
+        cand[sa[eq]] = True
+        cand[sb[eq]] = True
+        mine_all = labelled[cand[seg_l]]
+        k_eq = out[a[eq]]
+        as_left, as_right = cand[sa], cand[sb]
+        centres_of = grouped(seg[mine_all], mine_all)
+        right_of, left_of = grouped(sa[as_left], b[as_left]), grouped(sb[as_right], a[as_right])
+        moved = False
+        taken: set[int] = set()
+        for pair, nrows, at in zip(pairs.tolist(), rows.tolist(), first_of.tolist(), strict=True):
+            left_s, right_s = divmod(pair, n_seg)
+            if nrows < SETTLE_ROWS or left_s in taken or right_s in taken:
+                continue
+            k = int(k_eq[at])
+            tries = [(right_s, k + 1), (left_s, k - 1)]
+            if size[left_s] < size[right_s]:
+                tries.reverse()
+            for s_id, new in tries:
+                if not 0 <= new < len(planes):
+                    continue
+                # every row pair the segment takes part in stays in order with the new label
+                if (new >= out[right_of(s_id)]).any() or (out[left_of(s_id)] >= new).any():
+                    continue
+                mine = centres_of(s_id)
+                if not depth_in_range(rays.take(mine, axis=0), planes, np.full(len(mine), new), *zrange).all():
+                    continue
+                out[mine] = new
+                taken.update((left_s, right_s))
+                moved = True
+                break
+        if not moved:
+            break
+    return out
 
 
 def _enforce_row_order(c: Centres, labels: np.ndarray, order: np.ndarray) -> np.ndarray:

@@ -984,3 +984,38 @@ def test_virtual_planes_go_on_turning_about_the_pencils_axis():
     # the virtual planes continue the pattern's direction: the distance from the camera's axis grows on
     x_at = wide[:, 3] / wide[:, 0]  # where each plane crosses the x axis (y = z = 0)
     assert (np.diff(x_at) > 0).all() or (np.diff(x_at) < 0).all()
+
+
+def test_a_short_segment_carrying_its_row_neighbours_label_moves_one_stripe_where_that_is_clean():
+    from measurement.detection import Centres
+    from measurement.matching import _settle_equal_neighbours
+    from measurement.segments import row_order
+
+    # left to right: L (stripe 5, rows 0-19), S (5 as well, rows 5-10: one low), R (7, rows 0-19);
+    # T (5, rows 12-13: two rows only) beside L as well
+    parts = [(200.0, range(20), 5, 0), (220.0, range(5, 11), 5, 1), (260.0, range(20), 7, 2), (230.0, range(12, 14), 5, 3)]
+    u = np.concatenate([np.full(len(r), x) for x, r, _, _ in parts])
+    v = np.concatenate([np.array(list(r), np.int32) for _, r, _, _ in parts])
+    labels = np.concatenate([np.full(len(r), k) for _, r, k, _ in parts])
+    seg = np.concatenate([np.full(len(r), s) for _, r, _, s in parts])
+    c = Centres(u, v, np.full(len(u), 40.0, np.float32), np.full(len(u), 6.0, np.float32))
+    rays = np.column_stack([0.01 * u, np.zeros(len(u)), np.ones(len(u))])
+    planes = np.column_stack([np.ones(10), np.zeros(10), np.zeros(10), 10.0 * np.arange(1, 11)])  # x = 10 (k + 1)
+    out = _settle_equal_neighbours(c, rays, planes, seg, labels, row_order(c), (0.0, 1e9), np.zeros(len(u), bool))
+    assert (out[seg == 1] == 6).all()  # the smaller one, the right of the two, up
+    assert (out[seg == 0] == 5).all() and (out[seg == 2] == 7).all()
+    assert (out[seg == 3] == 5).all()  # two rows are not enough
+    # where the move would break the order on the other side (R at 6) and L cannot go down (a 4 left of it), none moves
+    labels2 = labels.copy()
+    labels2[seg == 2] = 6
+    u3 = np.concatenate([u, np.full(20, 180.0)])
+    v3 = np.concatenate([v, np.arange(20, dtype=np.int32)])
+    lab3 = np.concatenate([labels2, np.full(20, 4)])
+    seg3 = np.concatenate([seg, np.full(20, 4)])
+    c3 = Centres(u3, v3, np.full(len(u3), 40.0, np.float32), np.full(len(u3), 6.0, np.float32))
+    rays3 = np.column_stack([0.01 * u3, np.zeros(len(u3)), np.ones(len(u3))])
+    out3 = _settle_equal_neighbours(c3, rays3, planes, seg3, lab3, row_order(c3), (0.0, 1e9), np.zeros(len(u3), bool))
+    assert np.array_equal(out3, lab3)
+    # nor out of the working range
+    out4 = _settle_equal_neighbours(c, rays, planes, seg, labels, row_order(c), (0.0, 1.0), np.zeros(len(u), bool))
+    assert np.array_equal(out4, labels)
