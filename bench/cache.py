@@ -12,7 +12,7 @@ on 2026-12-01) and writes per view the animal's true crossings, how many of its 
 many of those right, the background's, the body length and height, and the count of wrong labels by their
 distance from the truth, and the same length and height definitions applied to the true stripe points; with
 ``--surface`` also the share of the animal's points within 2 mm of its true surface and their RMS
-(``bench/scan.py``'s figures; 11-14 minutes a dump, two run side by side on this 2-core host). ``compare`` prints the
+(``bench/scan.py``'s figures; 11-14 minutes a dump when this was written; 37 s without ``--surface`` on 2026-12-04; two run side by side on this 2-core host). ``compare`` prints the
 totals of two dumps over the views both hold (views with at least half the animal labelled and 95 % of that
 right; animal centres right and wrong; background centres wrong; the wrong labels of the views placed in the
 first dump by their shift from the truth; over those views, how many lengths and heights lie within 1 % of the
