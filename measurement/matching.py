@@ -378,11 +378,10 @@ def label_centres(c: Centres, rays: np.ndarray | Callable[[], np.ndarray], plane
     ok = labels >= 0
     at = np.flatnonzero(ok)
     labels[at[~depth_in_range(rays.take(at, axis=0), planes, labels[at], *params.depth_range_mm)]] = -1
-    if SETTLE_ROUNDS:
-        fixed = segment_mask(seg, bg_labels)[seg]  # the floor's and wall's labels stay, and a tail tip's
-        if tips:
-            fixed |= tip
-        labels = _settle_equal_neighbours(c, rays, planes, seg, labels, order, params.depth_range_mm, fixed)
+    fixed = segment_mask(seg, bg_labels)[seg]  # the floor's and wall's labels stay, and a tail tip's
+    if tips:
+        fixed |= tip
+    labels = _settle_equal_neighbours(c, rays, planes, seg, labels, order, params.depth_range_mm, fixed)
     if tips:  # a tail tip raised over the floor may lie beyond the floor's next stripe: held to the animal's
         labels = np.where(tip, _enforce_row_order(c, np.where(is_bg[seg], -1, labels), order),
                           _enforce_row_order(c, np.where(tip, -1, labels), order))
@@ -692,7 +691,7 @@ def _split_overspread(c, seg, idx, rel, left, right, n: int) -> list[np.ndarray]
     lab = np.full(len(c), -1, np.int64)
     lab[idx] = r - r.min()
     block = _blocks(c, seg, lab, left, right).take(seg.take(idx))
-    ids, counts = np.unique(block, return_counts=True)
+    ids, counts = _block_sizes(block)
     order = np.argsort(-counts, kind="stable")
     if counts[order[0]] < SPLIT_MAIN * len(idx):
         return []
@@ -1116,6 +1115,13 @@ def _blocks(c: Centres, seg: np.ndarray, lab: np.ndarray, left: np.ndarray, righ
     return connected_components(graph, directed=False)[1]
 
 
+def _block_sizes(block: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(block, return_counts=True)`` of block ids (K,) >= 0, by counting."""
+    counts = np.bincount(block)
+    ids = np.flatnonzero(counts)
+    return ids, counts[ids]
+
+
 def _part_shifts(c, rays, planes, seg, fg: dict[int, int], long_seg, left, right, bg_cl, bg_lit, table: BinTable,
                  n: int, bg_planes: np.ndarray | None = None, footprint: Footprints | None = None) -> dict[int, int]:
     """The animal's labels ``fg`` (segment -> label) with each block that slipped inside it moved back.
@@ -1139,9 +1145,7 @@ def _part_shifts(c, rays, planes, seg, fg: dict[int, int], long_seg, left, right
     if len(idx) < 2 * PART_MIN:
         return fg
     block = _blocks(c, seg, lab, left, right).take(seg.take(idx))
-    counts = np.bincount(block)  # (np.unique(block, return_counts=True) by counting: the same ids and counts)
-    ids = np.flatnonzero(counts)
-    counts = counts[ids]
+    ids, counts = _block_sizes(block)
     order = np.argsort(-counts)
     if counts[order[0]] < PART_MAIN * len(idx):
         return fg
@@ -2013,12 +2017,6 @@ def _settle_equal_neighbours(c: Centres, rays, planes, seg: np.ndarray, labels: 
     v = c.v
     n_seg = int(seg.max()) + 1
 
-    def grouped(keys: np.ndarray, values: np.ndarray) -> Callable[[int], np.ndarray]:
-        # key -> its values (in their order), from one sort (a pass over all of them per key cost 6 ms a top view)
-        srt = np.argsort(keys, kind="stable")
-        by, ks = values[srt], keys[srt]
-        return lambda k: by[np.searchsorted(ks, k):np.searchsorted(ks, k, side="right")]
-
     # the row pairs of consecutive labelled centres, and which centres are labelled, stay: a move changes labels only
     lo = order[out[order] >= 0]
     a, b = lo[:-1], lo[1:]
@@ -2042,8 +2040,9 @@ def _settle_equal_neighbours(c: Centres, rays, planes, seg: np.ndarray, labels: 
         mine_all = labelled[cand[seg_l]]
         k_eq = out[a[eq]]
         as_left, as_right = cand[sa], cand[sb]
-        centres_of = grouped(seg[mine_all], mine_all)
-        right_of, left_of = grouped(sa[as_left], b[as_left]), grouped(sb[as_right], a[as_right])
+        # (segment -> its centres and row partners by one sort each: a pass over all per segment cost 6 ms a top view)
+        centres_of = _by_label(mine_all, seg[mine_all])
+        right_of, left_of = _by_label(b[as_left], sa[as_left]), _by_label(a[as_right], sb[as_right])
         moved = False
         taken: set[int] = set()
         for pair, nrows, at in zip(pairs.tolist(), rows.tolist(), first_of.tolist(), strict=True):
